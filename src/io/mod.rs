@@ -1,0 +1,11 @@
+//! Readers and writers of the case format (CASE_FORMAT.md) and of the model folder.
+
+pub mod camera_file;
+pub mod case;
+pub mod ct;
+pub mod dicom;
+pub mod frames;
+pub mod nifti;
+pub mod paths;
+pub mod poses;
+pub mod video;

@@ -1,0 +1,14 @@
+//! bronchosim: patient-specific, photo-realistic airway models from CT and bronchoscope video.
+//!
+//! The pipeline follows Chung et al., "Enhancement of Visual Realism with BRDF for Patient
+//! Specific Bronchoscopy Simulation" (MICCAI 2004). Stages meet at plain data types:
+//! [`volume::Volume`], [`camera::Camera`], [`io::poses::Pose`], [`io::frames::Frame`].
+
+pub mod camera;
+pub mod error;
+pub mod inspect;
+pub mod io;
+pub mod math;
+pub mod volume;
+
+pub use error::{Error, Result};

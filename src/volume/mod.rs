@@ -1,0 +1,5 @@
+//! Voxel volumes with their index→world affine.
+
+mod grid;
+
+pub use grid::{orientation_code, Volume};
