@@ -9,6 +9,7 @@ pub mod error;
 pub mod inspect;
 pub mod io;
 pub mod math;
+pub mod mesh;
 pub mod volume;
 
 pub use error::{Error, Result};

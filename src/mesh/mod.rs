@@ -1,0 +1,5 @@
+//! Triangle meshes: the lumen surface and what is done to it.
+
+mod trimesh;
+
+pub use trimesh::TriMesh;
