@@ -1,5 +1,6 @@
 //! Readers and writers of the case format (CASE_FORMAT.md) and of the model folder.
 
+pub mod atomic;
 pub mod camera_file;
 pub mod case;
 pub mod ct;
