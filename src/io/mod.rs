@@ -5,6 +5,7 @@ pub mod camera_file;
 pub mod case;
 pub mod ct;
 pub mod dicom;
+pub mod frame_source;
 pub mod frames;
 pub mod nifti;
 pub mod paths;
