@@ -280,3 +280,60 @@ fn huge_header_fails_before_allocating() {
 fn non_dicom_file_fails() {
     expect_error("not_dicom", &["not_dicom/notes.txt", "not a DICOM file"]);
 }
+
+#[test]
+fn corrupted_bytes_never_panic() {
+    // Seeded byte corruption of one slice (a poor man's fuzzer until cargo-fuzz targets exist):
+    // every outcome must be Ok or an Err naming a file, never a panic. Kept to 100 cases: a
+    // corrupted element length makes dicom-parser 0.10 zero-fill up to 4 GB before it fails.
+    let files: Vec<(PathBuf, Vec<u8>)> = ["axial", "axial_rle"]
+        .iter()
+        .flat_map(|s| std::fs::read_dir(data(s)).unwrap().take(3))
+        .map(|e| {
+            let p = e.unwrap().path();
+            let b = std::fs::read(&p).unwrap();
+            (p, b)
+        })
+        .collect();
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let (mut ok, mut err) = (0, 0);
+    for _ in 0..100 {
+        let f = (next() % files.len() as u64) as usize;
+        let mut bytes = files[f].1.clone();
+        for _ in 0..1 + next() % 4 {
+            // Mostly hit the header (first 1 KB), where lengths and sizes live.
+            let span = if next() % 4 == 0 {
+                bytes.len()
+            } else {
+                1024.min(bytes.len())
+            };
+            let at = (next() % span as u64) as usize;
+            bytes[at] = next() as u8;
+        }
+        let one = vec![(files[f].0.clone(), bytes)];
+        match read_dicom_series_from_memory(&one) {
+            Ok(v) => {
+                assert_eq!(v.0.dims[..2], [24, 20]);
+                ok += 1;
+            }
+            Err(e) => {
+                assert!(
+                    e.to_string().contains(&*files[f].0.to_string_lossy())
+                        || e.to_string().contains("<memory>"),
+                    "{e}"
+                );
+                err += 1;
+            }
+        }
+    }
+    assert!(
+        ok > 0 && err > 0,
+        "corruption should sometimes be harmless and sometimes fatal: {ok} ok, {err} err"
+    );
+}

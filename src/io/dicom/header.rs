@@ -101,6 +101,8 @@ pub(crate) struct SliceHeader {
     pub bits_stored: u16,
     pub high_bit: u16,
     pub signed: bool,
+    /// Pixel data is encapsulated (compressed): it must go through a decoder.
+    pub encapsulated: bool,
     /// ImagePositionPatient, LPS mm.
     pub position: [f64; 3],
     /// ImageOrientationPatient: row direction cosines then column direction cosines (LPS).
@@ -310,8 +312,10 @@ impl SliceHeader {
         let signed = uint(tags::PIXEL_REPRESENTATION, "PixelRepresentation").unwrap_or(0) == 1;
 
         // The size check comes before any pixel buffer exists: a corrupt or hostile header must
-        // not make us allocate gigabytes (Rows and Columns are 16-bit, so this cannot overflow).
-        let needed = rows as u64 * cols as u64 * (bits_allocated as u64 / 8);
+        // not make us allocate gigabytes (saturating: a malformed file may store Rows/Columns as 32-bit).
+        let needed = (rows as u64)
+            .saturating_mul(cols as u64)
+            .saturating_mul(bits_allocated as u64 / 8);
         let encapsulated = !matches!(
             transfer_syntax.as_str(),
             "1.2.840.10008.1.2"
@@ -368,6 +372,7 @@ impl SliceHeader {
             bits_stored,
             high_bit,
             signed,
+            encapsulated,
             position: [position[0], position[1], position[2]],
             orientation: std::array::from_fn(|a| orientation[a]),
             pixel_spacing: [spacing[0], spacing[1]],

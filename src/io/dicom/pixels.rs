@@ -1,5 +1,6 @@
 //! Decode one slice's pixel data into Hounsfield units.
 
+use dicom_dictionary_std::tags;
 use dicom_pixeldata::PixelDecoder;
 
 use super::header::{describe_syntax, SliceHeader, Source};
@@ -10,7 +11,7 @@ use crate::{Error, Result};
 pub(crate) fn decode_slice(src: Source<'_>, h: &SliceHeader, out: &mut [f32]) -> Result<()> {
     let name = src.name();
     let obj = src.open(false)?;
-    let decoded = obj.decode_pixel_data().map_err(|e| {
+    let decode_error = |e: &dyn std::fmt::Display| {
         Error::invalid(
             name,
             format!(
@@ -18,8 +19,20 @@ pub(crate) fn decode_slice(src: Source<'_>, h: &SliceHeader, out: &mut [f32]) ->
                 describe_syntax(&h.transfer_syntax)
             ),
         )
-    })?;
-    let bytes = decoded.data();
+    };
+    // Native (unencapsulated) pixel data is used in place: decode_pixel_data would copy it.
+    let native;
+    let decoded;
+    let bytes: &[u8] = if h.encapsulated {
+        decoded = obj.decode_pixel_data().map_err(|e| decode_error(&e))?;
+        decoded.data()
+    } else {
+        let element = obj
+            .get(tags::PIXEL_DATA)
+            .ok_or_else(|| Error::invalid(name, "missing PixelData"))?;
+        native = element.to_bytes().map_err(|e| decode_error(&e))?;
+        &native
+    };
     let n = out.len();
     let bytes_per = (h.bits_allocated / 8) as usize;
     if bytes.len() < n * bytes_per {
