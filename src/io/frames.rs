@@ -162,8 +162,7 @@ impl Quantiser {
 
     #[inline]
     fn code(&self, x: f32) -> usize {
-        // Written so NaN takes the first branch.
-        if !(x > 0.0) {
+        if x.is_nan() || x <= 0.0 {
             return 0;
         }
         if x >= 1.0 {
