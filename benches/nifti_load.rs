@@ -44,7 +44,9 @@ fn bench(c: &mut Criterion) {
     write_nifti(&path, &ct_like([256, 256, 200])).unwrap();
     let mut g = c.benchmark_group("nifti");
     g.sample_size(10);
-    g.bench_function("read_nifti 256x256x200 int16 .nii.gz", |b| b.iter(|| read_nifti(&path).unwrap()));
+    g.bench_function("read_nifti 256x256x200 int16 .nii.gz", |b| {
+        b.iter(|| read_nifti(&path).unwrap())
+    });
     g.finish();
 }
 

@@ -3,8 +3,13 @@
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let path = args.next().expect("usage: nifti_load_timing FILE [REPEATS]");
-    let repeats: usize = args.next().map(|s| s.parse().expect("REPEATS is a number")).unwrap_or(3);
+    let path = args
+        .next()
+        .expect("usage: nifti_load_timing FILE [REPEATS]");
+    let repeats: usize = args
+        .next()
+        .map(|s| s.parse().expect("REPEATS is a number"))
+        .unwrap_or(3);
     for _ in 0..repeats {
         let t = std::time::Instant::now();
         let v = bronchosim::io::nifti::read_nifti(std::path::Path::new(&path)).expect("read");

@@ -1,1 +1,67 @@
-fn main() {}
+//! The `bronchosim` command line: parse, call the library, print. Nothing else lives here.
+
+use anyhow::Context;
+use bronchosim::inspect::{inspect_case, InspectOptions};
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Patient-specific, photo-realistic airway models from CT and bronchoscope video.
+#[derive(Parser, Debug)]
+#[command(name = "bronchosim", version, about, long_about = None)]
+struct Cli {
+    /// Silence progress bars and informational output.
+    #[arg(long, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Validate a case folder (CT, camera, poses, frames) and print a summary.
+    Inspect {
+        /// The case folder (see CASE_FORMAT.md).
+        case: PathBuf,
+        /// Print the summary as JSON instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Only read frame headers instead of decoding every frame (faster, checks less).
+        #[arg(long)]
+        quick: bool,
+    },
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Inspect { case, json, quick } => {
+            let opts = InspectOptions {
+                decode_all_frames: !quick,
+            };
+            let report = inspect_case(&case, &opts)
+                .with_context(|| format!("inspect {}", case.display()))?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                print!("{}", report.to_text());
+            }
+            for w in &report.warnings {
+                if !cli.quiet {
+                    eprintln!("warning: {w}");
+                }
+            }
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,1 +1,106 @@
-//! (in progress)
+//! The case's CT: `ct.nii.gz` / `ct.nii` or a DICOM series in `ct/`, read into HU with its affine.
+
+use crate::io::{dicom, nifti};
+use crate::volume::Volume;
+use crate::{Error, Result};
+use std::path::{Path, PathBuf};
+
+/// Where a case's CT lives.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum CtSource {
+    /// A NIfTI-1 file (`ct.nii.gz` or `ct.nii`).
+    Nifti(PathBuf),
+    /// A folder of DICOM slices (`ct/`).
+    Dicom(PathBuf),
+}
+
+impl CtSource {
+    /// The file or folder.
+    pub fn path(&self) -> &Path {
+        match self {
+            CtSource::Nifti(p) | CtSource::Dicom(p) => p,
+        }
+    }
+}
+
+/// What the reader found out about the CT beyond its voxels.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CtInfo {
+    /// "nifti" or "dicom".
+    pub format: &'static str,
+    /// How the affine was obtained (NIfTI: sform / qform / pixdim; DICOM: "ImagePositionPatient").
+    pub affine_source: String,
+    /// Warnings a person should see (e.g. a NIfTI without orientation).
+    pub warnings: Vec<String>,
+}
+
+/// Find the CT of the case in `case_dir`: exactly one of ct.nii.gz, ct.nii or ct/.
+pub fn find_ct(case_dir: &Path) -> Result<CtSource> {
+    let candidates = [("ct.nii.gz", false), ("ct.nii", false), ("ct", true)];
+    let found: Vec<CtSource> = candidates
+        .iter()
+        .filter_map(|&(name, is_dir)| {
+            let p = case_dir.join(name);
+            match (is_dir, p.is_dir(), p.is_file()) {
+                (true, true, _) => Some(CtSource::Dicom(p)),
+                (false, _, true) => Some(CtSource::Nifti(p)),
+                _ => None,
+            }
+        })
+        .collect();
+    match found.len() {
+        0 => Err(Error::missing(
+            case_dir,
+            "no CT: expected ct.nii.gz, ct.nii or a DICOM folder ct/",
+        )),
+        1 => Ok(found.into_iter().next().expect("one CT")),
+        _ => Err(Error::invalid(
+            case_dir,
+            format!(
+                "more than one CT ({}): keep exactly one",
+                found
+                    .iter()
+                    .map(|s| s
+                        .path()
+                        .file_name()
+                        .unwrap_or_default()
+                        .to_string_lossy()
+                        .into_owned())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )),
+    }
+}
+
+/// Read the CT in Hounsfield units, with its index→world affine (RAS mm).
+pub fn read_ct(source: &CtSource) -> Result<(Volume<f32>, CtInfo)> {
+    match source {
+        CtSource::Nifti(p) => {
+            let (vol, info) = nifti::read_nifti_with_info(p)?;
+            let source = serde_json::to_value(info.affine_source)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_owned))
+                .unwrap_or_default();
+            Ok((
+                vol,
+                CtInfo {
+                    format: "nifti",
+                    affine_source: source,
+                    warnings: info.warnings,
+                },
+            ))
+        }
+        CtSource::Dicom(dir) => {
+            let vol = dicom::read_dicom_series(dir)?;
+            Ok((
+                vol,
+                CtInfo {
+                    format: "dicom",
+                    affine_source: "ImagePositionPatient/ImageOrientationPatient (LPS→RAS)".into(),
+                    warnings: Vec::new(),
+                },
+            ))
+        }
+    }
+}

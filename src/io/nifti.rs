@@ -141,6 +141,15 @@ pub fn read_nifti_with_info(path: &Path) -> Result<(Volume<f32>, NiftiInfo)> {
     }
 }
 
+/// Read a NIfTI-1 image held in memory (`gz`: gzip-compressed); `path` only names it in errors.
+pub fn read_nifti_bytes(bytes: &[u8], gz: bool, path: &Path) -> Result<(Volume<f32>, NiftiInfo)> {
+    if gz {
+        read_nifti_stream(MultiGzDecoder::new(bytes), bytes.len() as u64, true, path)
+    } else {
+        read_nifti_stream(bytes, bytes.len() as u64, false, path)
+    }
+}
+
 /// Read a NIfTI-1 stream. `file_len` is the size of the file on disk (compressed when
 /// `compressed`), used to refuse headers that promise more data than the file can hold.
 /// `path` only names the source in errors.
@@ -188,7 +197,7 @@ pub fn read_nifti_stream<R: Read>(
     let nvox = dims[0] * dims[1] * dims[2];
     let data_bytes = (nvox as u64) * vtype.size() as u64;
     let vox_offset = hdr.vox_offset;
-    if !(vox_offset.is_finite() && vox_offset >= 348.0 && vox_offset < 1e9) {
+    if !(348.0..1e9).contains(&vox_offset) {
         return Err(Error::invalid(
             path,
             format!("vox_offset {vox_offset} is not a valid data offset"),
@@ -591,8 +600,8 @@ fn header_bytes<T: NiftiVoxel>(vol: &Volume<T>) -> Vec<u8> {
     let det = lin.determinant();
     let qfac = if det < 0.0 { -1.0 } else { 1.0 };
     put_f32(&mut h, 76, qfac as f32);
-    for a in 0..3 {
-        put_f32(&mut h, 80 + 4 * a, sp[a] as f32);
+    for (a, s) in sp.iter().enumerate() {
+        put_f32(&mut h, 80 + 4 * a, *s as f32);
     }
     put_f32(&mut h, 108, 352.0); // vox_offset
     put_f32(&mut h, 112, 1.0); // scl_slope
