@@ -5,6 +5,7 @@ pub mod case;
 pub mod ct;
 pub mod dicom;
 pub mod frames;
+pub mod mesh_export;
 pub mod nifti;
 pub mod paths;
 pub mod poses;
