@@ -124,6 +124,8 @@ impl Slice {
 
 impl Ctx<'_> {
     /// Fill the above flags and row summaries of slice `k`.
+    // `!(v < iso)` rather than `v >= iso` on purpose: NaN must count as tissue.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn classify(&self, k: usize, s: &mut Slice) {
         let (nx, ny) = (self.nx, self.ny);
         let base = k * nx * ny;
