@@ -209,3 +209,31 @@ fn remove_non_manifold(tris: &mut Vec<[u32; 3]>) -> usize {
     }
     before - tris.len()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn repair_removes_folds_and_fins() {
+        // Two triangles on edge 0-1 plus a third "fin" on it, a duplicated (folded) pair, and a
+        // degenerate triangle.
+        let mut tris = vec![
+            [0, 1, 2],
+            [1, 0, 3],
+            [0, 1, 4],
+            [5, 6, 7],
+            [7, 6, 5],
+            [2, 2, 3],
+            [8, 9, 10],
+        ];
+        assert_eq!(
+            non_manifold_vertices(&tris.iter().flatten().copied().collect::<Vec<_>>()),
+            vec![0, 1]
+        );
+        let removed = remove_non_manifold(&mut tris);
+        // Degenerate (1) + fold pair (2) + the three triangles on the non-manifold edge (3).
+        assert_eq!(removed, 6);
+        assert_eq!(tris, vec![[8, 9, 10]]);
+    }
+}
