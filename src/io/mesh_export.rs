@@ -1,0 +1,437 @@
+//! Mesh files: binary PLY, Wavefront OBJ and binary glTF 2.0 (GLB), all in world mm (RAS+).
+//!
+//! Every writer is atomic: it writes a temporary file in the target's folder and renames it into
+//! place, so an interrupted run never leaves a truncated mesh behind.
+
+use std::io::{BufRead, BufReader, BufWriter, Read, Write};
+use std::path::Path;
+
+use gltf_json as json;
+use json::validation::Checked::Valid;
+
+use crate::math::Point3;
+use crate::mesh::TriMesh;
+use crate::{Error, Result};
+
+/// Write `path` atomically: `fill` writes the content into a temporary file beside it.
+fn atomic_write(
+    path: &Path,
+    fill: impl FnOnce(&mut BufWriter<&mut std::fs::File>) -> std::io::Result<()>,
+) -> Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| Error::io(path, e))?;
+    {
+        let mut w = BufWriter::new(tmp.as_file_mut());
+        fill(&mut w).map_err(|e| Error::io(path, e))?;
+        w.flush().map_err(|e| Error::io(path, e))?;
+    }
+    tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
+    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    Ok(())
+}
+
+/// Fail when a triangle refers past the vertex list or the UVs do not match the vertices.
+fn check_mesh(path: &Path, mesh: &TriMesh, uvs: Option<&[[f32; 2]]>) -> Result<()> {
+    let n = mesh.positions.len();
+    if let Some(t) = mesh
+        .triangles
+        .iter()
+        .find(|t| t.iter().any(|&v| v as usize >= n))
+    {
+        return Err(Error::Other(format!(
+            "{}: cannot write a mesh whose triangle {t:?} refers past its {n} vertices",
+            path.display()
+        )));
+    }
+    if let Some(uv) = uvs {
+        if uv.len() != n {
+            return Err(Error::Other(format!(
+                "{}: {} UVs given for {n} vertices",
+                path.display(),
+                uv.len()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Binary little-endian PLY: vertex x y z nx ny nz (float, mm; normals unit, into the lumen),
+/// faces as `list uchar uint`.
+pub fn write_ply(path: &Path, mesh: &TriMesh) -> Result<()> {
+    check_mesh(path, mesh, None)?;
+    let normals = mesh.vertex_normals();
+    atomic_write(path, |w| {
+        write!(
+            w,
+            "ply\nformat binary_little_endian 1.0\ncomment bronchosim lumen mesh, world mm (RAS+)\n\
+             element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
+             property float nx\nproperty float ny\nproperty float nz\n\
+             element face {}\nproperty list uchar uint vertex_indices\nend_header\n",
+            mesh.positions.len(),
+            mesh.triangles.len()
+        )?;
+        for (p, n) in mesh.positions.iter().zip(&normals) {
+            for v in [p.x, p.y, p.z, n.x, n.y, n.z] {
+                w.write_all(&v.to_le_bytes())?;
+            }
+        }
+        for t in &mesh.triangles {
+            w.write_all(&[3u8])?;
+            for v in t {
+                w.write_all(&v.to_le_bytes())?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// Read a binary little-endian PLY with float vertex properties (x, y, z first) and triangle
+/// faces (`list uchar int|uint`), as [`write_ply`] writes it. Other properties are skipped.
+pub fn read_ply(path: &Path) -> Result<TriMesh> {
+    let f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut r = BufReader::new(f);
+    let bad = |m: &str| Error::invalid(path, m.to_string());
+    let mut line = String::new();
+    let (mut nv, mut nf, mut vprops, mut in_vertex, mut binary) =
+        (0usize, 0usize, Vec::<String>::new(), false, false);
+    let mut header_lines = 0;
+    loop {
+        line.clear();
+        if r.read_line(&mut line).map_err(|e| Error::io(path, e))? == 0 {
+            return Err(bad("PLY header has no end_header"));
+        }
+        header_lines += 1;
+        if header_lines == 1 && line.trim() != "ply" {
+            return Err(bad("not a PLY file (first line is not 'ply')"));
+        }
+        let w: Vec<&str> = line.split_whitespace().collect();
+        match w.as_slice() {
+            ["format", "binary_little_endian", _] => binary = true,
+            ["format", ..] => {
+                return Err(Error::unsupported(
+                    path,
+                    "only binary_little_endian PLY is read",
+                ))
+            }
+            ["element", "vertex", n] => {
+                nv = n.parse().map_err(|_| bad("bad vertex count"))?;
+                in_vertex = true;
+            }
+            ["element", "face", n] => {
+                nf = n.parse().map_err(|_| bad("bad face count"))?;
+                in_vertex = false;
+            }
+            ["property", "float" | "float32", name] if in_vertex => vprops.push(name.to_string()),
+            ["property", t, _] if in_vertex => {
+                return Err(Error::unsupported(
+                    path,
+                    format!("vertex property type {t} (only float)"),
+                ))
+            }
+            ["property", "list", "uchar" | "uint8", "int" | "uint" | "int32" | "uint32", _] => {}
+            ["property", ..] => {
+                return Err(Error::unsupported(
+                    path,
+                    "face property other than list uchar int",
+                ))
+            }
+            ["end_header"] => break,
+            _ => {}
+        }
+    }
+    if !binary || vprops.len() < 3 || vprops[..3] != ["x", "y", "z"] {
+        return Err(bad(
+            "PLY needs binary_little_endian and float x y z as the first vertex properties",
+        ));
+    }
+    let stride = 4 * vprops.len();
+    let mut vbuf = vec![0u8; nv * stride];
+    r.read_exact(&mut vbuf)
+        .map_err(|_| bad("PLY vertex data is truncated"))?;
+    let f32at = |o: usize| f32::from_le_bytes([vbuf[o], vbuf[o + 1], vbuf[o + 2], vbuf[o + 3]]);
+    let positions = (0..nv)
+        .map(|i| {
+            Point3::new(
+                f32at(i * stride),
+                f32at(i * stride + 4),
+                f32at(i * stride + 8),
+            )
+        })
+        .collect();
+    let mut triangles = Vec::with_capacity(nf);
+    let mut fbuf = [0u8; 13];
+    for _ in 0..nf {
+        r.read_exact(&mut fbuf)
+            .map_err(|_| bad("PLY face data is truncated"))?;
+        if fbuf[0] != 3 {
+            return Err(Error::unsupported(
+                path,
+                format!("a face with {} vertices (only triangles)", fbuf[0]),
+            ));
+        }
+        let v = |k: usize| {
+            u32::from_le_bytes([
+                fbuf[1 + 4 * k],
+                fbuf[2 + 4 * k],
+                fbuf[3 + 4 * k],
+                fbuf[4 + 4 * k],
+            ])
+        };
+        let t = [v(0), v(1), v(2)];
+        if t.iter().any(|&i| i as usize >= nv) {
+            return Err(bad("a face refers past the vertex list"));
+        }
+        triangles.push(t);
+    }
+    Ok(TriMesh {
+        positions,
+        triangles,
+    })
+}
+
+/// Wavefront OBJ: `v` (mm), `vn` (unit, into the lumen), optional `vt` (u, v with v up, as OBJ
+/// expects), and 1-based `f` lines.
+pub fn write_obj(path: &Path, mesh: &TriMesh, uvs: Option<&[[f32; 2]]>) -> Result<()> {
+    check_mesh(path, mesh, uvs)?;
+    let normals = mesh.vertex_normals();
+    atomic_write(path, |w| {
+        writeln!(
+            w,
+            "# bronchosim lumen mesh, world mm (RAS+), normals face into the lumen"
+        )?;
+        for p in &mesh.positions {
+            writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
+        }
+        for n in &normals {
+            writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
+        }
+        if let Some(uv) = uvs {
+            for t in uv {
+                // Texture rows run top-down (glTF convention); OBJ's v runs bottom-up.
+                writeln!(w, "vt {} {}", t[0], 1.0 - t[1])?;
+            }
+        }
+        for t in &mesh.triangles {
+            let [a, b, c] = t.map(|v| v + 1);
+            if uvs.is_some() {
+                writeln!(w, "f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}")?;
+            } else {
+                writeln!(w, "f {a}//{a} {b}//{b} {c}//{c}")?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// Binary glTF 2.0: one mesh with POSITION (world mm, RAS+; glTF's metre and +Y-up conventions are
+/// deliberately not applied), NORMAL (into the lumen), u32 indices and, when `texture` is given,
+/// TEXCOORD_0 (u right, v down, as glTF defines) with the PNG embedded as the base colour.
+pub fn write_glb(path: &Path, mesh: &TriMesh, texture: Option<(&[[f32; 2]], &[u8])>) -> Result<()> {
+    check_mesh(path, mesh, texture.map(|t| t.0))?;
+    let normals = mesh.vertex_normals();
+    let n = mesh.positions.len();
+    let mut bin: Vec<u8> = Vec::new();
+    let mut root = json::Root {
+        asset: json::Asset {
+            version: "2.0".into(),
+            generator: Some(format!("bronchosim {}", env!("CARGO_PKG_VERSION"))),
+            copyright: None,
+            extensions: None,
+            extras: Default::default(),
+            min_version: None,
+        },
+        ..Default::default()
+    };
+    let buffer = root.push(json::Buffer {
+        byte_length: 0u64.into(),
+        name: None,
+        uri: None,
+        extensions: None,
+        extras: Default::default(),
+    });
+    let view = |root: &mut json::Root,
+                bin: &mut Vec<u8>,
+                bytes: &[u8],
+                target: Option<json::buffer::Target>| {
+        while bin.len() % 4 != 0 {
+            bin.push(0);
+        }
+        let offset = bin.len();
+        bin.extend_from_slice(bytes);
+        root.push(json::buffer::View {
+            buffer,
+            byte_length: bytes.len().into(),
+            byte_offset: Some(offset.into()),
+            byte_stride: None,
+            name: None,
+            target: target.map(Valid),
+            extensions: None,
+            extras: Default::default(),
+        })
+    };
+    let accessor = |root: &mut json::Root,
+                    view: json::Index<json::buffer::View>,
+                    count: usize,
+                    ct: json::accessor::ComponentType,
+                    ty: json::accessor::Type,
+                    bounds: Option<([f32; 3], [f32; 3])>| {
+        root.push(json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: count.into(),
+            component_type: Valid(json::accessor::GenericComponentType(ct)),
+            extensions: None,
+            extras: Default::default(),
+            type_: Valid(ty),
+            min: bounds.map(|b| json::Value::from(b.0.to_vec())),
+            max: bounds.map(|b| json::Value::from(b.1.to_vec())),
+            name: None,
+            normalized: false,
+            sparse: None,
+        })
+    };
+    let f32s =
+        |v: &mut dyn Iterator<Item = f32>| v.flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in &mesh.positions {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    if n == 0 {
+        (lo, hi) = ([0.0; 3], [0.0; 3]);
+    }
+    use json::accessor::{ComponentType as C, Type as T};
+    use json::buffer::Target;
+    let pos_bytes = f32s(&mut mesh.positions.iter().flat_map(|p| [p.x, p.y, p.z]));
+    let v = view(&mut root, &mut bin, &pos_bytes, Some(Target::ArrayBuffer));
+    let pos = accessor(&mut root, v, n, C::F32, T::Vec3, Some((lo, hi)));
+    let nrm_bytes = f32s(&mut normals.iter().flat_map(|p| [p.x, p.y, p.z]));
+    let v = view(&mut root, &mut bin, &nrm_bytes, Some(Target::ArrayBuffer));
+    let nrm = accessor(&mut root, v, n, C::F32, T::Vec3, None);
+    let mut attributes = std::collections::BTreeMap::new();
+    attributes.insert(Valid(json::mesh::Semantic::Positions), pos);
+    attributes.insert(Valid(json::mesh::Semantic::Normals), nrm);
+    let mut material = None;
+    if let Some((uv, png)) = texture {
+        let uv_bytes = f32s(&mut uv.iter().flat_map(|t| [t[0], t[1]]));
+        let v = view(&mut root, &mut bin, &uv_bytes, Some(Target::ArrayBuffer));
+        let tc = accessor(&mut root, v, n, C::F32, T::Vec2, None);
+        attributes.insert(Valid(json::mesh::Semantic::TexCoords(0)), tc);
+        let v = view(&mut root, &mut bin, png, None);
+        let image = root.push(json::Image {
+            buffer_view: Some(v),
+            mime_type: Some(json::image::MimeType("image/png".into())),
+            name: None,
+            uri: None,
+            extensions: None,
+            extras: Default::default(),
+        });
+        let sampler = root.push(json::texture::Sampler {
+            mag_filter: Some(Valid(json::texture::MagFilter::Linear)),
+            min_filter: Some(Valid(json::texture::MinFilter::LinearMipmapLinear)),
+            wrap_s: Valid(json::texture::WrappingMode::ClampToEdge),
+            wrap_t: Valid(json::texture::WrappingMode::ClampToEdge),
+            ..Default::default()
+        });
+        let tex = root.push(json::Texture {
+            name: None,
+            sampler: Some(sampler),
+            source: image,
+            extensions: None,
+            extras: Default::default(),
+        });
+        let mut m = json::Material {
+            double_sided: true,
+            ..Default::default()
+        };
+        m.pbr_metallic_roughness.base_color_texture = Some(json::texture::Info {
+            index: tex,
+            tex_coord: 0,
+            extensions: None,
+            extras: Default::default(),
+        });
+        m.pbr_metallic_roughness.metallic_factor = json::material::StrengthFactor(0.0);
+        material = Some(root.push(m));
+    }
+    let idx_bytes: Vec<u8> = mesh
+        .triangles
+        .iter()
+        .flatten()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let v = view(
+        &mut root,
+        &mut bin,
+        &idx_bytes,
+        Some(Target::ElementArrayBuffer),
+    );
+    let indices = accessor(
+        &mut root,
+        v,
+        3 * mesh.triangles.len(),
+        C::U32,
+        T::Scalar,
+        None,
+    );
+    let mesh_i = root.push(json::Mesh {
+        extensions: None,
+        extras: Default::default(),
+        name: Some("lumen".into()),
+        primitives: vec![json::mesh::Primitive {
+            attributes,
+            extensions: None,
+            extras: Default::default(),
+            indices: Some(indices),
+            material,
+            mode: Valid(json::mesh::Mode::Triangles),
+            targets: None,
+        }],
+        weights: None,
+    });
+    let node = root.push(json::Node {
+        mesh: Some(mesh_i),
+        name: Some("lumen".into()),
+        ..Default::default()
+    });
+    let scene = root.push(json::Scene {
+        extensions: None,
+        extras: Default::default(),
+        name: None,
+        nodes: vec![node],
+    });
+    root.scene = Some(scene);
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    root.buffers[0].byte_length = bin.len().into();
+    let mut js = json::serialize::to_vec(&root)
+        .map_err(|e| Error::Other(format!("{}: glTF JSON: {e}", path.display())))?;
+    while js.len() % 4 != 0 {
+        js.push(b' ');
+    }
+    let total = 12 + 8 + js.len() + 8 + bin.len();
+    if total > u32::MAX as usize {
+        return Err(Error::Other(format!(
+            "{}: mesh too large for a GLB ({total} bytes)",
+            path.display()
+        )));
+    }
+    atomic_write(path, |w| {
+        w.write_all(b"glTF")?;
+        w.write_all(&2u32.to_le_bytes())?;
+        w.write_all(&(total as u32).to_le_bytes())?;
+        w.write_all(&(js.len() as u32).to_le_bytes())?;
+        w.write_all(b"JSON")?;
+        w.write_all(&js)?;
+        w.write_all(&(bin.len() as u32).to_le_bytes())?;
+        w.write_all(b"BIN\0")?;
+        w.write_all(&bin)
+    })
+}
