@@ -35,8 +35,12 @@ impl<T: Copy> Volume<T> {
                 dims[0] * dims[1] * dims[2]
             )));
         }
-        if !affine.iter().all(|v| v.is_finite()) || affine.fixed_view::<3, 3>(0, 0).determinant().abs() < 1e-12 {
-            return Err(Error::Other(format!("volume affine is singular or non-finite: {affine}")));
+        if !affine.iter().all(|v| v.is_finite())
+            || affine.fixed_view::<3, 3>(0, 0).determinant().abs() < 1e-12
+        {
+            return Err(Error::Other(format!(
+                "volume affine is singular or non-finite: {affine}"
+            )));
         }
         Ok(Volume { dims, affine, data })
     }
@@ -86,7 +90,10 @@ impl<T: Copy> Volume<T> {
 
     /// Continuous voxel index of a world position (mm).
     pub fn world_to_index(&self, xyz: Point3<f64>) -> Point3<f64> {
-        let inv = self.affine.try_inverse().expect("a volume's affine is invertible");
+        let inv = self
+            .affine
+            .try_inverse()
+            .expect("a volume's affine is invertible");
         transform_point(&inv, &xyz)
     }
 
@@ -114,9 +121,21 @@ impl<T: Copy> Volume<T> {
         let mut hi = Point3::new(f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
         for c in 0..8 {
             let ijk = Point3::new(
-                if c & 1 == 0 { 0.0 } else { self.dims[0].saturating_sub(1) as f64 },
-                if c & 2 == 0 { 0.0 } else { self.dims[1].saturating_sub(1) as f64 },
-                if c & 4 == 0 { 0.0 } else { self.dims[2].saturating_sub(1) as f64 },
+                if c & 1 == 0 {
+                    0.0
+                } else {
+                    self.dims[0].saturating_sub(1) as f64
+                },
+                if c & 2 == 0 {
+                    0.0
+                } else {
+                    self.dims[1].saturating_sub(1) as f64
+                },
+                if c & 4 == 0 {
+                    0.0
+                } else {
+                    self.dims[2].saturating_sub(1) as f64
+                },
             );
             let w = self.index_to_world(ijk);
             for a in 0..3 {
@@ -143,9 +162,21 @@ impl Volume<f32> {
         if p.x > (nx - 1) as f64 || p.y > (ny - 1) as f64 || p.z > (nz - 1) as f64 {
             return None;
         }
-        let (i0, j0, k0) = (p.x.floor() as usize, p.y.floor() as usize, p.z.floor() as usize);
-        let (i1, j1, k1) = ((i0 + 1).min(nx - 1), (j0 + 1).min(ny - 1), (k0 + 1).min(nz - 1));
-        let (fx, fy, fz) = ((p.x - i0 as f64) as f32, (p.y - j0 as f64) as f32, (p.z - k0 as f64) as f32);
+        let (i0, j0, k0) = (
+            p.x.floor() as usize,
+            p.y.floor() as usize,
+            p.z.floor() as usize,
+        );
+        let (i1, j1, k1) = (
+            (i0 + 1).min(nx - 1),
+            (j0 + 1).min(ny - 1),
+            (k0 + 1).min(nz - 1),
+        );
+        let (fx, fy, fz) = (
+            (p.x - i0 as f64) as f32,
+            (p.y - j0 as f64) as f32,
+            (p.z - k0 as f64) as f32,
+        );
         let l = |a: f32, b: f32, t: f32| a + (b - a) * t;
         let c00 = l(self.get(i0, j0, k0), self.get(i1, j0, k0), fx);
         let c10 = l(self.get(i0, j1, k0), self.get(i1, j1, k0), fx);
@@ -178,7 +209,11 @@ pub fn orientation_code(affine: &Affine) -> String {
             }
         }
         used[best] = true;
-        code.push(if col[best] >= 0.0 { POS[best] } else { NEG[best] });
+        code.push(if col[best] >= 0.0 {
+            POS[best]
+        } else {
+            NEG[best]
+        });
     }
     code
 }
@@ -191,9 +226,18 @@ mod tests {
     fn world_index_round_trip_through_flipped_oblique_affine() {
         let mut a = Affine::identity();
         let (s, c) = (0.3f64.sin(), 0.3f64.cos());
-        a.fixed_view_mut::<3, 3>(0, 0).copy_from(&nalgebra::Matrix3::new(
-            -0.7 * c, 0.7 * s, 0.0, -0.7 * s, -0.7 * c, 0.0, 0.0, 0.0, 2.5,
-        ));
+        a.fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&nalgebra::Matrix3::new(
+                -0.7 * c,
+                0.7 * s,
+                0.0,
+                -0.7 * s,
+                -0.7 * c,
+                0.0,
+                0.0,
+                0.0,
+                2.5,
+            ));
         a[(0, 3)] = 120.0;
         a[(1, 3)] = -80.0;
         a[(2, 3)] = -300.0;

@@ -1,5 +1,10 @@
-//! Voxel volumes with their index→world affine.
+//! Voxel volumes with their index→world affine, and airway segmentation.
 
 mod grid;
+pub mod branches;
+pub mod morphology;
+pub mod region_grow;
+pub mod seed;
+pub mod segment;
 
 pub use grid::{orientation_code, Volume};
