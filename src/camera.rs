@@ -62,14 +62,21 @@ impl Camera {
             return None;
         }
         let d = self.distort_normalized(Vector2::new(p.x / p.z, p.y / p.z));
-        Some(Point2::new(self.fx * d.x + self.cx, self.fy * d.y + self.cy))
+        Some(Point2::new(
+            self.fx * d.x + self.cx,
+            self.fy * d.y + self.cy,
+        ))
     }
 
     /// Unit viewing ray in camera coordinates through distorted pixel (u, v).
     #[inline]
     pub fn pixel_ray(&self, u: f64, v: f64) -> Vector3<f64> {
         let xd = Vector2::new((u - self.cx) / self.fx, (v - self.cy) / self.fy);
-        let n = if self.is_pinhole() { xd } else { self.undistort_normalized(xd) };
+        let n = if self.is_pinhole() {
+            xd
+        } else {
+            self.undistort_normalized(xd)
+        };
         Vector3::new(n.x, n.y, 1.0).normalize()
     }
 
@@ -92,7 +99,10 @@ impl Camera {
             if det.abs() < 1e-15 {
                 break;
             }
-            let step = Vector2::new((j11 * f.x - j01 * f.y) / det, (-j10 * f.x + j00 * f.y) / det);
+            let step = Vector2::new(
+                (j11 * f.x - j01 * f.y) / det,
+                (-j10 * f.x + j00 * f.y) / det,
+            );
             p -= step;
             if step.norm() < 1e-14 {
                 break;

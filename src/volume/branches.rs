@@ -26,7 +26,7 @@ impl Default for BranchCountOptions {
     fn default() -> Self {
         BranchCountOptions {
             shell_mm: 1.0,
-            min_branch_mm: 4.0,
+            min_branch_mm: 2.0,
         }
     }
 }
@@ -35,8 +35,16 @@ impl Default for BranchCountOptions {
 /// outside the mask or where unreachable.
 pub fn geodesic_from_top(mask: &Volume<u8>) -> Vec<f32> {
     let [nx, ny, nz] = mask.dims;
-    let col = |a: usize| Vector3::new(mask.affine[(0, a)], mask.affine[(1, a)], mask.affine[(2, a)]);
-    let ax = (0..3).max_by(|&a, &b| col(a).z.abs().total_cmp(&col(b).z.abs())).unwrap_or(2);
+    let col = |a: usize| {
+        Vector3::new(
+            mask.affine[(0, a)],
+            mask.affine[(1, a)],
+            mask.affine[(2, a)],
+        )
+    };
+    let ax = (0..3)
+        .max_by(|&a, &b| col(a).z.abs().total_cmp(&col(b).z.abs()))
+        .unwrap_or(2);
     let up = col(ax).z > 0.0;
     let coord = |n: usize| [n % nx, (n / nx) % ny, n / (nx * ny)];
     let mut dist = vec![f32::INFINITY; mask.len()];
@@ -62,7 +70,10 @@ pub fn geodesic_from_top(mask: &Volume<u8>) -> Vec<f32> {
         for dj in -1i64..=1 {
             for di in -1i64..=1 {
                 if (di, dj, dk) != (0, 0, 0) {
-                    let w = ((di as f64 * sp[0]).powi(2) + (dj as f64 * sp[1]).powi(2) + (dk as f64 * sp[2]).powi(2)).sqrt();
+                    let w = ((di as f64 * sp[0]).powi(2)
+                        + (dj as f64 * sp[1]).powi(2)
+                        + (dk as f64 * sp[2]).powi(2))
+                    .sqrt();
                     offs.push((di, dj, dk, w as f32));
                 }
             }
@@ -99,7 +110,20 @@ pub fn geodesic_from_top(mask: &Volume<u8>) -> Vec<f32> {
 pub fn count_branches(mask: &Volume<u8>, opts: &BranchCountOptions) -> usize {
     let [nx, ny, nz] = mask.dims;
     let dist = geodesic_from_top(mask);
-    let shell: Vec<u32> = dist.iter().map(|&d| if d.is_finite() { (d as f64 / opts.shell_mm) as u32 } else { u32::MAX }).collect();
+    // Shells thinner than a voxel break into fragments: never go below the largest spacing.
+    let shell_mm = opts
+        .shell_mm
+        .max(mask.spacing().into_iter().fold(0.0, f64::max));
+    let shell: Vec<u32> = dist
+        .iter()
+        .map(|&d| {
+            if d.is_finite() {
+                (d as f64 / shell_mm) as u32
+            } else {
+                u32::MAX
+            }
+        })
+        .collect();
     let mut comp = vec![u32::MAX; mask.len()];
     let mut comp_shell: Vec<u32> = Vec::new();
     let mut parent: Vec<Option<u32>> = Vec::new();
@@ -156,7 +180,7 @@ pub fn count_branches(mask: &Volume<u8>, opts: &BranchCountOptions) -> usize {
             }
         }
     }
-    let min_shells = (opts.min_branch_mm / opts.shell_mm).ceil() as u32;
+    let min_shells = (opts.min_branch_mm / shell_mm).ceil() as u32;
     let mut significant_children = vec![0usize; nc];
     let mut roots = 0;
     for c in 0..nc {
@@ -166,7 +190,11 @@ pub fn count_branches(mask: &Volume<u8>, opts: &BranchCountOptions) -> usize {
             _ => {}
         }
     }
-    roots + significant_children.iter().filter(|&&k| k >= 2).sum::<usize>()
+    roots
+        + significant_children
+            .iter()
+            .filter(|&&k| k >= 2)
+            .sum::<usize>()
 }
 
 #[cfg(test)]

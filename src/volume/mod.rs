@@ -1,7 +1,7 @@
 //! Voxel volumes with their index→world affine, and airway segmentation.
 
-mod grid;
 pub mod branches;
+mod grid;
 pub mod morphology;
 pub mod region_grow;
 pub mod seed;

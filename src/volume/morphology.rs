@@ -10,10 +10,17 @@ use rayon::prelude::*;
 
 /// Squared Euclidean distance (mm²) from every voxel to the nearest voxel where `feature`
 /// is true; `f32::INFINITY` when there is none. Voxels outside the grid are not features.
-pub fn distance_transform_sq(dims: [usize; 3], spacing: [f64; 3], feature: impl Fn(usize) -> bool + Sync) -> Vec<f32> {
+pub fn distance_transform_sq(
+    dims: [usize; 3],
+    spacing: [f64; 3],
+    feature: impl Fn(usize) -> bool + Sync,
+) -> Vec<f32> {
     let [nx, ny, nz] = dims;
     let slice = nx * ny;
-    let mut d: Vec<f32> = (0..nx * ny * nz).into_par_iter().map(|i| if feature(i) { 0.0 } else { f32::INFINITY }).collect();
+    let mut d: Vec<f32> = (0..nx * ny * nz)
+        .into_par_iter()
+        .map(|i| if feature(i) { 0.0 } else { f32::INFINITY })
+        .collect();
     let w = spacing.map(|s| (s * s) as f32);
     // x and y passes are independent per slice.
     d.par_chunks_mut(slice).for_each(|s| {
@@ -95,7 +102,8 @@ impl Scratch {
                     break;
                 }
                 let p = self.v[k as usize];
-                let s = ((f[q] + w * (q * q) as f32) - (f[p] + w * (p * p) as f32)) / (2.0 * w * (q as f32 - p as f32));
+                let s = ((f[q] + w * (q * q) as f32) - (f[p] + w * (p * p) as f32))
+                    / (2.0 * w * (q as f32 - p as f32));
                 if s <= self.z[k as usize] {
                     k -= 1;
                     continue;
@@ -155,14 +163,23 @@ pub fn fill_holes(mask: &Volume<u8>) -> Volume<u8> {
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {
-                let border = i == 0 || j == 0 || k == 0 || i + 1 == nx || j + 1 == ny || k + 1 == nz;
+                let border =
+                    i == 0 || j == 0 || k == 0 || i + 1 == nx || j + 1 == ny || k + 1 == nz;
                 if border && m[i + nx * (j + ny * k)] == 0 {
                     seeds.push((i + nx * (j + ny * k)) as u32);
                 }
             }
         }
     }
-    flood_fill(mask.dims, &mut outside, &seeds, 1, |i| m[i] == 0, None, usize::MAX);
+    flood_fill(
+        mask.dims,
+        &mut outside,
+        &seeds,
+        1,
+        |i| m[i] == 0,
+        None,
+        usize::MAX,
+    );
     mask_from(mask, outside.iter().map(|&o| 1 - o).collect())
 }
 
@@ -171,7 +188,15 @@ pub fn component_of(mask: &Volume<u8>, seed: [usize; 3]) -> Volume<u8> {
     let m = &mask.data;
     let mut out = vec![0u8; m.len()];
     let s = mask.index(seed[0], seed[1], seed[2]);
-    flood_fill(mask.dims, &mut out, &[s as u32], 1, |i| m[i] != 0, None, usize::MAX);
+    flood_fill(
+        mask.dims,
+        &mut out,
+        &[s as u32],
+        1,
+        |i| m[i] != 0,
+        None,
+        usize::MAX,
+    );
     mask_from(mask, out)
 }
 
@@ -201,7 +226,9 @@ mod tests {
     fn distance_transform_matches_brute_force_with_anisotropic_spacing() {
         let dims = [13, 11, 9];
         let mut r = crate::phantom::rng::Pcg32::new(5, 1);
-        let feat: Vec<bool> = (0..dims[0] * dims[1] * dims[2]).map(|_| r.uniform() < 0.02).collect();
+        let feat: Vec<bool> = (0..dims[0] * dims[1] * dims[2])
+            .map(|_| r.uniform() < 0.02)
+            .collect();
         let sp = [0.5, 0.7, 1.25];
         let d = distance_transform_sq(dims, sp, |i| feat[i]);
         for k in 0..dims[2] {
@@ -209,12 +236,21 @@ mod tests {
                 for i in 0..dims[0] {
                     let mut best = f64::INFINITY;
                     for (n, _) in feat.iter().enumerate().filter(|(_, &f)| f) {
-                        let (a, b, c) = (n % dims[0], (n / dims[0]) % dims[1], n / (dims[0] * dims[1]));
-                        let e = ((i as f64 - a as f64) * sp[0]).powi(2) + ((j as f64 - b as f64) * sp[1]).powi(2) + ((k as f64 - c as f64) * sp[2]).powi(2);
+                        let (a, b, c) = (
+                            n % dims[0],
+                            (n / dims[0]) % dims[1],
+                            n / (dims[0] * dims[1]),
+                        );
+                        let e = ((i as f64 - a as f64) * sp[0]).powi(2)
+                            + ((j as f64 - b as f64) * sp[1]).powi(2)
+                            + ((k as f64 - c as f64) * sp[2]).powi(2);
                         best = best.min(e);
                     }
                     let got = d[i + dims[0] * (j + dims[1] * k)] as f64;
-                    assert!((got - best).abs() < 1e-3 * (1.0 + best), "({i},{j},{k}) {got} vs {best}");
+                    assert!(
+                        (got - best).abs() < 1e-3 * (1.0 + best),
+                        "({i},{j},{k}) {got} vs {best}"
+                    );
                 }
             }
         }

@@ -87,20 +87,39 @@ pub fn flood_fill(
 
 /// Voxels 6-connected to `seed` with `lower <= value <= upper` (both inclusive, as SimpleITK's
 /// ConnectedThreshold). Returns a 0/1 mask on the volume's grid.
-pub fn connected_threshold(vol: &Volume<f32>, seed: [usize; 3], lower: f32, upper: f32) -> Result<Volume<u8>> {
+pub fn connected_threshold(
+    vol: &Volume<f32>,
+    seed: [usize; 3],
+    lower: f32,
+    upper: f32,
+) -> Result<Volume<u8>> {
     check_seed(vol, seed)?;
     let mut label = vec![0u8; vol.len()];
     let d = &vol.data;
-    flood_fill(vol.dims, &mut label, &[vol.index(seed[0], seed[1], seed[2]) as u32], 1, |i| d[i] >= lower && d[i] <= upper, None, usize::MAX);
+    flood_fill(
+        vol.dims,
+        &mut label,
+        &[vol.index(seed[0], seed[1], seed[2]) as u32],
+        1,
+        |i| d[i] >= lower && d[i] <= upper,
+        None,
+        usize::MAX,
+    );
     Volume::from_data(vol.dims, vol.affine, label)
 }
 
 fn check_seed(vol: &Volume<f32>, seed: [usize; 3]) -> Result<()> {
     if (0..3).any(|a| seed[a] >= vol.dims[a]) {
-        return Err(Error::Other(format!("region growing: seed {seed:?} is outside the grid {:?}", vol.dims)));
+        return Err(Error::Other(format!(
+            "region growing: seed {seed:?} is outside the grid {:?}",
+            vol.dims
+        )));
     }
     if vol.len() >= u32::MAX as usize {
-        return Err(Error::Other(format!("region growing: grid {:?} has more than 2^32 voxels", vol.dims)));
+        return Err(Error::Other(format!(
+            "region growing: grid {:?} has more than 2^32 voxels",
+            vol.dims
+        )));
     }
     Ok(())
 }
@@ -159,7 +178,11 @@ pub struct AdaptiveGrowth {
 ///
 /// Each step resumes from the previous region's rejected neighbours, so the whole schedule
 /// costs about one flood fill; a step is abandoned as soon as it passes the growth limit.
-pub fn grow_adaptive(vol: &Volume<f32>, seed: [usize; 3], opts: &AdaptiveOptions) -> Result<AdaptiveGrowth> {
+pub fn grow_adaptive(
+    vol: &Volume<f32>,
+    seed: [usize; 3],
+    opts: &AdaptiveOptions,
+) -> Result<AdaptiveGrowth> {
     check_seed(vol, seed)?;
     if !(opts.step_hu > 0.0) || !(opts.max_hu >= opts.start_hu) || !(opts.leak_growth_limit > 1.0) {
         return Err(Error::Other(format!(
@@ -168,7 +191,9 @@ pub fn grow_adaptive(vol: &Volume<f32>, seed: [usize; 3], opts: &AdaptiveOptions
     }
     let n_steps = ((opts.max_hu - opts.start_hu) / opts.step_hu).floor() as usize + 1;
     if n_steps > 254 {
-        return Err(Error::Other(format!("region growing: {n_steps} threshold steps, at most 254 are supported")));
+        return Err(Error::Other(format!(
+            "region growing: {n_steps} threshold steps, at most 254 are supported"
+        )));
     }
     let sp = vol.spacing();
     let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
@@ -188,8 +213,19 @@ pub fn grow_adaptive(vol: &Volume<f32>, seed: [usize; 3], opts: &AdaptiveOptions
         };
         let mut frontier = Vec::new();
         let budget = limit.saturating_sub(total);
-        let (added, stopped) = flood_fill(vol.dims, &mut label, &pending, s as u8 + 1, |i| d[i] <= thr, Some(&mut frontier), budget);
-        steps.push(ThresholdStep { hu: thr, voxels: total + added });
+        let (added, stopped) = flood_fill(
+            vol.dims,
+            &mut label,
+            &pending,
+            s as u8 + 1,
+            |i| d[i] <= thr,
+            Some(&mut frontier),
+            budget,
+        );
+        steps.push(ThresholdStep {
+            hu: thr,
+            voxels: total + added,
+        });
         if stopped {
             exploded = true;
             break;
@@ -197,7 +233,11 @@ pub fn grow_adaptive(vol: &Volume<f32>, seed: [usize; 3], opts: &AdaptiveOptions
         total += added;
         pending = frontier;
     }
-    let chosen = if exploded { steps.len().saturating_sub(2) } else { steps.len() - 1 };
+    let chosen = if exploded {
+        steps.len().saturating_sub(2)
+    } else {
+        steps.len() - 1
+    };
     if exploded && steps.len() < 2 {
         return Err(Error::Other(format!(
             "region growing: the region exploded already at the first threshold {} HU (seed {seed:?} not in an airway?)",
@@ -262,7 +302,9 @@ mod tests {
         let mut r = crate::phantom::rng::Pcg32::new(3, 3);
         for t in 0..20 {
             let dims = [17 + t, 13, 11];
-            let data: Vec<f32> = (0..dims[0] * dims[1] * dims[2]).map(|_| r.uniform() as f32).collect();
+            let data: Vec<f32> = (0..dims[0] * dims[1] * dims[2])
+                .map(|_| r.uniform() as f32)
+                .collect();
             let vol = Volume::from_data(dims, Affine::identity(), data).unwrap();
             let seed = [t % dims[0], 6, 5];
             let upper = 0.55 + 0.01 * t as f32;
@@ -282,7 +324,13 @@ mod tests {
             for y in 15..26 {
                 for x in 15..26 {
                     let r2 = (x as i32 - 20).pow(2) + (y as i32 - 20).pow(2);
-                    let val = if r2 <= 9 { -1000.0 } else if r2 <= 25 { 40.0 } else { continue };
+                    let val = if r2 <= 9 {
+                        -1000.0
+                    } else if r2 <= 25 {
+                        40.0
+                    } else {
+                        continue;
+                    };
                     v.set(x, y, z, val);
                 }
             }

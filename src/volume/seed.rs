@@ -68,7 +68,9 @@ struct Candidate {
 pub fn find_trachea_seed(ct: &Volume<f32>, opts: &SeedOptions) -> Result<TracheaSeed> {
     // The axial axis is the grid axis most aligned with world z; "up" is +z (superior).
     let col = |a: usize| Vector3::new(ct.affine[(0, a)], ct.affine[(1, a)], ct.affine[(2, a)]);
-    let ax = (0..3).max_by(|&a, &b| col(a).z.abs().total_cmp(&col(b).z.abs())).unwrap_or(2);
+    let ax = (0..3)
+        .max_by(|&a, &b| col(a).z.abs().total_cmp(&col(b).z.abs()))
+        .unwrap_or(2);
     let (u, v) = match ax {
         0 => (1, 2),
         1 => (0, 2),
@@ -127,7 +129,12 @@ pub fn find_trachea_seed(ct: &Volume<f32>, opts: &SeedOptions) -> Result<Trachea
             while let Some(p) = stack.pop() {
                 pix.push(p);
                 let (a, b) = (p % nu, p / nu);
-                let ns4 = [(a > 0).then(|| p - 1), (a + 1 < nu).then(|| p + 1), (b > 0).then(|| p - nu), (b + 1 < nv).then(|| p + nu)];
+                let ns4 = [
+                    (a > 0).then(|| p - 1),
+                    (a + 1 < nu).then(|| p + 1),
+                    (b > 0).then(|| p - nu),
+                    (b + 1 < nv).then(|| p + nu),
+                ];
                 for q in ns4.into_iter().flatten() {
                     if air[q] != 0 && label[q] == 0 {
                         label[q] = 1;
@@ -145,16 +152,28 @@ pub fn find_trachea_seed(ct: &Volume<f32>, opts: &SeedOptions) -> Result<Trachea
             }) {
                 continue;
             }
-            let (ma, mb) = pix.iter().fold((0.0, 0.0), |(x, y), &p| (x + (p % nu) as f64, y + (p / nu) as f64));
+            let (ma, mb) = pix.iter().fold((0.0, 0.0), |(x, y), &p| {
+                (x + (p % nu) as f64, y + (p / nu) as f64)
+            });
             let (ma, mb) = (ma / pix.len() as f64, mb / pix.len() as f64);
             let mm = |da: f64, db: f64| ((da * sp[u]).powi(2) + (db * sp[v]).powi(2)).sqrt();
-            let rmax = pix.iter().map(|&p| mm((p % nu) as f64 - ma, (p / nu) as f64 - mb)).fold(0.0, f64::max) + 0.5 * sp[u].min(sp[v]);
+            let rmax = pix
+                .iter()
+                .map(|&p| mm((p % nu) as f64 - ma, (p / nu) as f64 - mb))
+                .fold(0.0, f64::max)
+                + 0.5 * sp[u].min(sp[v]);
             let roundness = area / (std::f64::consts::PI * rmax * rmax);
             let offset = mm(ma - centre.x, mb - centre.y) / half_width_mm;
             if roundness < opts.min_roundness || offset > opts.max_offset {
                 continue;
             }
-            let &nearest = pix.iter().min_by(|&&p, &&q| mm((p % nu) as f64 - ma, (p / nu) as f64 - mb).total_cmp(&mm((q % nu) as f64 - ma, (q / nu) as f64 - mb))).unwrap();
+            let &nearest = pix
+                .iter()
+                .min_by(|&&p, &&q| {
+                    mm((p % nu) as f64 - ma, (p / nu) as f64 - mb)
+                        .total_cmp(&mm((q % nu) as f64 - ma, (q / nu) as f64 - mb))
+                })
+                .unwrap();
             let pixel = voxel(nearest % nu, nearest / nu, s);
             let mut c = [0.0; 3];
             c[u] = ma;
@@ -192,7 +211,11 @@ pub fn find_trachea_seed(ct: &Volume<f32>, opts: &SeedOptions) -> Result<Trachea
             if let Some(c) = mid {
                 return Ok(TracheaSeed {
                     voxel: c.pixel,
-                    world: ct.index_to_world(Point3::new(c.pixel[0] as f64, c.pixel[1] as f64, c.pixel[2] as f64)),
+                    world: ct.index_to_world(Point3::new(
+                        c.pixel[0] as f64,
+                        c.pixel[1] as f64,
+                        c.pixel[2] as f64,
+                    )),
                     area_mm2: c.area,
                 });
             }

@@ -86,7 +86,8 @@ pub fn segment_airway(ct: &Volume<f32>, opts: &SegmentOptions) -> Result<Segment
     let margin = opts.closing_radius_mm.max(0.0);
     let sp = ct.spacing();
     let pad = [0, 1, 2].map(|a| (margin / sp[a]).ceil() as usize + 2);
-    let (lo, hi) = bounding_box(&g.mask).ok_or_else(|| Error::Other("region growing produced an empty region".into()))?;
+    let (lo, hi) = bounding_box(&g.mask)
+        .ok_or_else(|| Error::Other("region growing produced an empty region".into()))?;
     let lo = [0, 1, 2].map(|a| lo[a].saturating_sub(pad[a]));
     let hi = [0, 1, 2].map(|a| (hi[a] + pad[a]).min(ct.dims[a] - 1));
     let mut sub = crop(&g.mask, lo, hi);
@@ -104,7 +105,11 @@ pub fn segment_airway(ct: &Volume<f32>, opts: &SegmentOptions) -> Result<Segment
     Ok(Segmentation {
         mask,
         seed_voxel,
-        seed_world: ct.index_to_world(Point3::new(seed_voxel[0] as f64, seed_voxel[1] as f64, seed_voxel[2] as f64)),
+        seed_world: ct.index_to_world(Point3::new(
+            seed_voxel[0] as f64,
+            seed_voxel[1] as f64,
+            seed_voxel[2] as f64,
+        )),
         seed_automatic,
         threshold_hu: chosen.hu,
         thresholds: g.steps.clone(),

@@ -1,0 +1,146 @@
+//! Airway segmentation against known truth: the geometric phantom, real airway trees
+//! (ATM'22 masks made CT-like), and SimpleITK's ConnectedThreshold.
+
+use bronchosim::math::Point3;
+use bronchosim::phantom::{make_ct_phantom, CtPhantom, CtPhantomOptions};
+use bronchosim::volume::segment::{segment_airway, SegmentOptions};
+use bronchosim::volume::Volume;
+
+fn count(m: &Volume<u8>) -> usize {
+    m.data.iter().filter(|&&v| v != 0).count()
+}
+
+/// Segmented voxels farther than one voxel (6-neighbourhood) from the truth lumen.
+fn leaked_voxels(seg: &Volume<u8>, truth: &Volume<u8>) -> usize {
+    let [nx, ny, nz] = seg.dims;
+    let mut n = 0;
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                if seg.get(i, j, k) == 0 || truth.get(i, j, k) != 0 {
+                    continue;
+                }
+                let near = [
+                    (-1i64, 0i64, 0i64),
+                    (1, 0, 0),
+                    (0, -1, 0),
+                    (0, 1, 0),
+                    (0, 0, -1),
+                    (0, 0, 1),
+                ]
+                .iter()
+                .any(|&(a, b, c)| {
+                    let (x, y, z) = (i as i64 + a, j as i64 + b, k as i64 + c);
+                    x >= 0
+                        && y >= 0
+                        && z >= 0
+                        && (x as usize) < nx
+                        && (y as usize) < ny
+                        && (z as usize) < nz
+                        && truth.get(x as usize, y as usize, z as usize) != 0
+                });
+                if !near {
+                    n += 1;
+                }
+            }
+        }
+    }
+    n
+}
+
+fn check_phantom(ph: &CtPhantom, name: &str) {
+    let seg = segment_airway(&ph.ct, &SegmentOptions::default()).unwrap();
+    let sp = ph.ct.spacing();
+    println!(
+        "{name}: dims {:?} seed {:?} ({:.1}, {:.1}, {:.1}) threshold {} exploded {} volume {:.2} ml truth {:.2} ml branches {} (truth {})",
+        ph.ct.dims, seg.seed_voxel, seg.seed_world.x, seg.seed_world.y, seg.seed_world.z, seg.threshold_hu, seg.exploded, seg.volume_ml, ph.truth_volume_ml, seg.branch_count, ph.tree.branches.len()
+    );
+    println!(
+        "  steps: {:?}",
+        seg.thresholds
+            .iter()
+            .map(|s| (s.hu, s.voxels))
+            .collect::<Vec<_>>()
+    );
+    // The seed is in the trachea.
+    let tr = &ph.tree.branches[0];
+    assert!(tr.sdf(&seg.seed_world) < 0.0, "seed outside the trachea");
+    let rel = seg.volume_ml / ph.truth_volume_ml - 1.0;
+    println!("  volume error {:.2}%", 100.0 * rel);
+    let leak = leaked_voxels(&seg.mask, &ph.truth_mask);
+    println!(
+        "  leaked voxels (beyond 1 voxel of truth): {leak} of {}",
+        count(&seg.mask)
+    );
+    // Every branch wider than 2 voxels: its centreline samples (away from the junction ends,
+    // where the neighbour tubes overlap) fall in segmented voxels.
+    let mut missed = Vec::new();
+    for b in &ph.tree.branches {
+        if b.min_diameter_mm() <= 2.0 * sp[0].max(sp[1]) {
+            continue;
+        }
+        let samples: Vec<&Point3<f64>> = b.centreline.iter().collect();
+        let hits = samples
+            .iter()
+            .filter(|p| {
+                ph.ct
+                    .voxel_at_world(***p)
+                    .is_some_and(|v| seg.mask.get(v[0], v[1], v[2]) != 0)
+            })
+            .count();
+        let inside = samples
+            .iter()
+            .filter(|p| ph.ct.voxel_at_world(***p).is_some())
+            .count();
+        if (hits as f64) < 0.9 * inside as f64 {
+            missed.push((b.id, hits, inside));
+        }
+    }
+    println!("  branches missed: {missed:?}");
+    assert!(
+        rel.abs() < 0.05,
+        "{name}: volume {:.2} ml vs truth {:.2} ml",
+        seg.volume_ml,
+        ph.truth_volume_ml
+    );
+    assert!(
+        leak as f64 <= 0.005 * count(&seg.mask) as f64,
+        "{name}: {leak} voxels leaked"
+    );
+    assert!(missed.is_empty(), "{name}: branches missed {missed:?}");
+    let nb = ph.tree.branches.len() as i64;
+    assert!(
+        (seg.branch_count as i64 - nb).abs() <= 3,
+        "{name}: {} branches counted, {nb} in the tree",
+        seg.branch_count
+    );
+}
+
+#[test]
+fn phantom_segmentation_recovers_the_truth() {
+    let ph = make_ct_phantom(&CtPhantomOptions::default()).unwrap();
+    check_phantom(&ph, "phantom 0.7x0.7x1.0");
+}
+
+#[test]
+fn automatic_seed_and_given_seed_agree() {
+    let ph = make_ct_phantom(&CtPhantomOptions::coarse()).unwrap();
+    let auto = segment_airway(&ph.ct, &SegmentOptions::default()).unwrap();
+    assert!(auto.seed_automatic);
+    // A seed given in world mm (the carina region, 20 mm above the carina) gives the same mask.
+    let c = ph.tree.carina();
+    let given = SegmentOptions {
+        seed_world: Some(Point3::new(c.x, c.y + 2.0, c.z + 20.0)),
+        ..Default::default()
+    };
+    let manual = segment_airway(&ph.ct, &given).unwrap();
+    assert!(!manual.seed_automatic);
+    assert_eq!(manual.mask.data, auto.mask.data);
+    // A seed outside the CT is an error naming the CT's extent.
+    let bad = SegmentOptions {
+        seed_world: Some(Point3::new(1e4, 0.0, 0.0)),
+        ..Default::default()
+    };
+    let e = segment_airway(&ph.ct, &bad).unwrap_err().to_string();
+    assert!(e.contains("outside the CT"), "{e}");
+}
