@@ -1,9 +1,11 @@
 //! Readers and writers of the case format (CASE_FORMAT.md) and of the model folder.
 
+pub mod atomic;
 pub mod camera_file;
 pub mod case;
 pub mod ct;
 pub mod dicom;
+pub mod frame_source;
 pub mod frames;
 pub mod nifti;
 pub mod paths;

@@ -1,1 +1,280 @@
-//! (in progress)
+//! poses.json (and views.json, the same schema): the camera→world pose of each frame.
+//!
+//! Schema (CASE_FORMAT.md): `{ "frames": [ { "image": "frames/000000.png" | "frame": 0,
+//! "camera_to_world": [16 numbers, row-major] } ] }`. Each matrix is validated: finite numbers,
+//! last row `0 0 0 1`, a rotation block that is orthonormal with determinant +1.
+
+use std::path::{Path, PathBuf};
+
+use serde_json::Value;
+
+use crate::io::paths::{relative_slash_path, resolve_case_relative};
+use crate::math::{Affine, Matrix3, Point3, Vector3};
+use crate::{Error, Result};
+
+/// Largest allowed deviation of `RᵀR` from the identity (any entry) and of `det R` from +1.
+pub const ROTATION_TOLERANCE: f64 = 1e-4;
+
+/// Largest allowed deviation of the last matrix row from `0 0 0 1` (printing round-off only).
+pub const LAST_ROW_TOLERANCE: f64 = 1e-9;
+
+/// Which image a pose belongs to.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum FrameRef {
+    /// A PNG file, resolved against the case folder and checked to lie inside it.
+    Image(PathBuf),
+    /// A 0-based decoded-frame index into the case's video.
+    VideoIndex(usize),
+}
+
+/// One entry of poses.json: a frame and the camera→world transform (mm) of the camera that
+/// took it. Camera axes follow OpenCV: +x right, +y down, +z the viewing direction.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseEntry {
+    /// The frame this pose belongs to.
+    pub frame: FrameRef,
+    /// Camera coordinates (mm) → world coordinates (mm, RAS+); a rigid transform.
+    pub camera_to_world: Affine,
+}
+
+/// The name the crate root documentation uses for a pose entry.
+pub type Pose = PoseEntry;
+
+impl PoseEntry {
+    /// The camera centre (and light position) in world mm.
+    pub fn centre(&self) -> Point3<f64> {
+        camera_centre(&self.camera_to_world)
+    }
+
+    /// The unit viewing direction (camera +z) in world coordinates.
+    pub fn viewing_direction(&self) -> Vector3<f64> {
+        viewing_direction(&self.camera_to_world)
+    }
+
+    /// The world→camera transform (inverse of the rigid camera→world).
+    pub fn world_to_camera(&self) -> Affine {
+        rigid_inverse(&self.camera_to_world)
+    }
+}
+
+/// The camera centre in world mm: the translation column of camera→world.
+pub fn camera_centre(camera_to_world: &Affine) -> Point3<f64> {
+    Point3::new(
+        camera_to_world[(0, 3)],
+        camera_to_world[(1, 3)],
+        camera_to_world[(2, 3)],
+    )
+}
+
+/// The unit viewing direction in world coordinates: the image of camera +z.
+pub fn viewing_direction(camera_to_world: &Affine) -> Vector3<f64> {
+    Vector3::new(
+        camera_to_world[(0, 2)],
+        camera_to_world[(1, 2)],
+        camera_to_world[(2, 2)],
+    )
+    .normalize()
+}
+
+/// Inverse of a rigid transform `[R t; 0 1]`: `[Rᵀ -Rᵀt; 0 1]` (exact, no general inversion).
+pub fn rigid_inverse(m: &Affine) -> Affine {
+    let r = m.fixed_view::<3, 3>(0, 0).transpose();
+    let t = -(r * m.fixed_view::<3, 1>(0, 3));
+    let mut out = Affine::identity();
+    out.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
+    out.fixed_view_mut::<3, 1>(0, 3).copy_from(&t);
+    out
+}
+
+/// Check that `m` is a camera→world pose: finite, last row `0 0 0 1`, rotation orthonormal
+/// with determinant +1 (within [`ROTATION_TOLERANCE`]). The message says what is wrong.
+pub fn validate_pose(m: &Affine) -> std::result::Result<(), String> {
+    if let Some(k) = (0..16).find(|&k| !m[(k / 4, k % 4)].is_finite()) {
+        return Err(format!("element {k} is not finite ({})", m[(k / 4, k % 4)]));
+    }
+    let last = [m[(3, 0)], m[(3, 1)], m[(3, 2)], m[(3, 3)]];
+    if last
+        .iter()
+        .zip([0.0, 0.0, 0.0, 1.0])
+        .any(|(a, b)| (a - b).abs() > LAST_ROW_TOLERANCE)
+    {
+        return Err(format!(
+            "last row is {} {} {} {}, expected 0 0 0 1",
+            last[0], last[1], last[2], last[3]
+        ));
+    }
+    let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let off = (r.transpose() * r - Matrix3::identity()).abs().max();
+    if off > ROTATION_TOLERANCE {
+        return Err(format!(
+            "rotation is not orthonormal (max |RᵀR - I| = {off:.3e} > {ROTATION_TOLERANCE:e})"
+        ));
+    }
+    let det = r.determinant();
+    if (det - 1.0).abs() > ROTATION_TOLERANCE {
+        return Err(format!(
+            "rotation has determinant {det:.6}, expected +1 (a reflection is not a camera pose)"
+        ));
+    }
+    Ok(())
+}
+
+/// Read and validate poses.json at `path`; `"image"` paths are resolved inside `case_dir`.
+///
+/// Rules beyond the per-matrix checks: the `frames` list is not empty; every entry has exactly
+/// one of `"image"` (a relative path) and `"frame"` (a non-negative integer); all entries use
+/// the same one; video frame indices strictly increase (frames are decoded in one pass).
+pub fn read_poses(path: &Path, case_dir: &Path) -> Result<Vec<PoseEntry>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    // serde_json refuses numbers that overflow f64 (1e400) with "number out of range".
+    let root: Value = serde_json::from_str(&text)
+        .map_err(|e| Error::invalid(path, format!("not valid JSON: {e}")))?;
+    let frames = root
+        .as_object()
+        .ok_or_else(|| Error::invalid(path, "expected a JSON object with a \"frames\" list"))?
+        .get("frames")
+        .ok_or_else(|| Error::invalid(path, "missing the \"frames\" list"))?
+        .as_array()
+        .ok_or_else(|| Error::invalid(path, "\"frames\" is not a list"))?;
+    if frames.is_empty() {
+        return Err(Error::invalid(path, "\"frames\" is empty"));
+    }
+    let mut out: Vec<PoseEntry> = Vec::with_capacity(frames.len());
+    for (i, entry) in frames.iter().enumerate() {
+        let pose = parse_entry(entry, i, path, case_dir)?;
+        if let Some(prev) = out.last() {
+            match (&prev.frame, &pose.frame) {
+                (FrameRef::Image(_), FrameRef::VideoIndex(_))
+                | (FrameRef::VideoIndex(_), FrameRef::Image(_)) => {
+                    return Err(Error::invalid(
+                        path,
+                        format!("frame {i}: mixes \"image\" and \"frame\" entries; use one kind"),
+                    ));
+                }
+                (FrameRef::VideoIndex(a), FrameRef::VideoIndex(b)) if b <= a => {
+                    return Err(Error::invalid(
+                        path,
+                        format!("frame {i}: video index {b} does not follow {a}; indices must strictly increase"),
+                    ));
+                }
+                _ => {}
+            }
+        }
+        out.push(pose);
+    }
+    Ok(out)
+}
+
+/// Describe entry `i` for messages: its index and, when readable, its image or frame.
+fn entry_label(entry: &Value, i: usize) -> String {
+    match (
+        entry.get("image").and_then(Value::as_str),
+        entry.get("frame"),
+    ) {
+        (Some(img), _) => format!("frame {i} ({img})"),
+        (None, Some(f)) => format!("frame {i} (video frame {f})"),
+        _ => format!("frame {i}"),
+    }
+}
+
+fn parse_entry(entry: &Value, i: usize, path: &Path, case_dir: &Path) -> Result<PoseEntry> {
+    let label = entry_label(entry, i);
+    let bad = |msg: String| Error::invalid(path, format!("{label}: {msg}"));
+    let obj = entry
+        .as_object()
+        .ok_or_else(|| bad("expected an object".into()))?;
+    let frame = match (obj.get("image"), obj.get("frame")) {
+        (Some(_), Some(_)) => return Err(bad("has both \"image\" and \"frame\"; give one".into())),
+        (None, None) => {
+            return Err(bad(
+                "needs \"image\" (a PNG path) or \"frame\" (a video index)".into(),
+            ))
+        }
+        (Some(image), None) => {
+            let rel = image
+                .as_str()
+                .ok_or_else(|| bad(format!("\"image\" is not a string ({image})")))?;
+            let resolved = resolve_case_relative(case_dir, rel, path)
+                .map_err(|e| bad(strip_path_prefix(&e.to_string(), path)))?;
+            FrameRef::Image(resolved)
+        }
+        (None, Some(index)) => {
+            let n = index
+                .as_u64()
+                .and_then(|n| usize::try_from(n).ok())
+                .ok_or_else(|| {
+                    bad(format!(
+                        "\"frame\" must be a non-negative integer, not {index}"
+                    ))
+                })?;
+            FrameRef::VideoIndex(n)
+        }
+    };
+    let values = obj
+        .get("camera_to_world")
+        .ok_or_else(|| bad("missing \"camera_to_world\"".into()))?
+        .as_array()
+        .ok_or_else(|| bad("\"camera_to_world\" is not a list of 16 numbers".into()))?;
+    if values.len() != 16 {
+        return Err(bad(format!(
+            "\"camera_to_world\" has {} numbers, expected 16 (a row-major 4x4 matrix)",
+            values.len()
+        )));
+    }
+    let mut m = Affine::zeros();
+    for (k, v) in values.iter().enumerate() {
+        let x = v
+            .as_f64()
+            .ok_or_else(|| bad(format!("camera_to_world[{k}] is not a number ({v})")))?;
+        if !x.is_finite() {
+            return Err(bad(format!("camera_to_world[{k}] is not finite ({x})")));
+        }
+        m[(k / 4, k % 4)] = x;
+    }
+    validate_pose(&m).map_err(|msg| bad(format!("camera_to_world: {msg}")))?;
+    Ok(PoseEntry {
+        frame,
+        camera_to_world: m,
+    })
+}
+
+/// Drop a leading "`path`: " from a nested error message so the file is named once.
+fn strip_path_prefix(message: &str, path: &Path) -> String {
+    let prefix = format!("{}: ", path.display());
+    message.strip_prefix(&prefix).unwrap_or(message).to_string()
+}
+
+/// Write `poses` as poses.json (or views.json) at `path`, one entry per line, numbers in
+/// shortest round-trip form. Image paths are written relative to `base_dir` with `/`.
+/// Each pose is validated first so a file this writes is always readable by [`read_poses`].
+pub fn write_poses(path: &Path, poses: &[PoseEntry], base_dir: &Path) -> Result<()> {
+    if poses.is_empty() {
+        return Err(Error::Other(format!(
+            "{}: no poses to write",
+            path.display()
+        )));
+    }
+    let mut text = String::from("{ \"frames\": [\n");
+    for (i, pose) in poses.iter().enumerate() {
+        validate_pose(&pose.camera_to_world)
+            .map_err(|msg| Error::Other(format!("{}: frame {i}: {msg}", path.display())))?;
+        let frame = match &pose.frame {
+            FrameRef::Image(p) => {
+                let rel = relative_slash_path(base_dir, p, path)?;
+                format!("\"image\": {}", serde_json::Value::String(rel))
+            }
+            FrameRef::VideoIndex(n) => format!("\"frame\": {n}"),
+        };
+        let m = &pose.camera_to_world;
+        let numbers: Vec<String> = (0..16)
+            .map(|k| serde_json::Value::from(m[(k / 4, k % 4)]).to_string())
+            .collect();
+        let sep = if i + 1 < poses.len() { "," } else { "" };
+        text.push_str(&format!(
+            "  {{ {frame}, \"camera_to_world\": [{}] }}{sep}\n",
+            numbers.join(", ")
+        ));
+    }
+    text.push_str("] }\n");
+    std::fs::write(path, text).map_err(|e| Error::io(path, e))
+}
