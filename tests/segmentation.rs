@@ -144,3 +144,54 @@ fn automatic_seed_and_given_seed_agree() {
     let e = segment_airway(&ph.ct, &bad).unwrap_err().to_string();
     assert!(e.contains("outside the CT"), "{e}");
 }
+
+/// ATM'22 tree → CT-like volume (full resolution, cropped to the tree + 10 mm) →
+/// segmentation, scored against the mask.
+fn check_atm(file: &str, downsample: usize) {
+    use bronchosim::phantom::from_mask::{ct_from_mask_file, FromMaskOptions};
+    let path = std::path::Path::new("/work/shared/data/atm22-airways").join(file);
+    if !path.exists() {
+        // The shared data folder is outside the repository; say so rather than pass silently.
+        panic!(
+            "{}: missing (the ATM'22 masks are needed for this test)",
+            path.display()
+        );
+    }
+    let opts = FromMaskOptions {
+        crop_margin_mm: Some(10.0),
+        downsample,
+        ..Default::default()
+    };
+    let ph = ct_from_mask_file(&path, &opts).unwrap();
+    let seg = segment_airway(&ph.ct, &SegmentOptions::default()).unwrap();
+    let (s, t) = (count(&seg.mask), count(&ph.truth_mask));
+    let both = seg
+        .mask
+        .data
+        .iter()
+        .zip(&ph.truth_mask.data)
+        .filter(|(a, b)| **a != 0 && **b != 0)
+        .count();
+    let dice = 2.0 * both as f64 / (s + t) as f64;
+    let fp = (s - both) as f64 / t as f64;
+    println!(
+        "{file} (downsample {downsample}, grid {:?}, body {}): seed {:?} threshold {} exploded {} volume {:.2} ml branches {} dice {dice:.4} fp {:.2}%",
+        ph.ct.dims, ph.has_body, seg.seed_voxel, seg.threshold_hu, seg.exploded, seg.volume_ml, seg.branch_count, 100.0 * fp
+    );
+    assert!(dice >= 0.90, "{file}: Dice {dice:.4}");
+    assert!(
+        fp <= 0.02,
+        "{file}: false-positive volume {:.2}% of the truth",
+        100.0 * fp
+    );
+}
+
+#[test]
+fn atm_305_tree_is_recovered() {
+    check_atm("ATM_305_airway_mask.nii.gz", 1);
+}
+
+#[test]
+fn atm_384_tree_is_recovered() {
+    check_atm("ATM_384_airway_mask.nii.gz", 1);
+}

@@ -3,6 +3,7 @@
 
 pub mod anatomy;
 pub mod ct_volume;
+pub mod from_mask;
 pub mod rng;
 
 pub use anatomy::{AirwayTree, Branch, TreeOptions};
