@@ -195,3 +195,50 @@ fn atm_305_tree_is_recovered() {
 fn atm_384_tree_is_recovered() {
     check_atm("ATM_384_airway_mask.nii.gz", 1);
 }
+
+#[test]
+fn region_growing_equals_simpleitk_connected_threshold() {
+    use bronchosim::math::Affine;
+    use bronchosim::volume::region_grow::connected_threshold;
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/region_grow_reference.json"
+    ))
+    .unwrap();
+    let r: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let dims: Vec<usize> = r["dims"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    let seed: Vec<usize> = r["seed"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    let values: Vec<f32> = r["values"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_i64().unwrap() as f32)
+        .collect();
+    let mut want = Vec::new();
+    for (n, run) in r["mask_runs"].as_array().unwrap().iter().enumerate() {
+        want.extend(std::iter::repeat_n(
+            (n % 2) as u8,
+            run.as_u64().unwrap() as usize,
+        ));
+    }
+    let vol = Volume::from_data([dims[0], dims[1], dims[2]], Affine::identity(), values).unwrap();
+    let ours = connected_threshold(
+        &vol,
+        [seed[0], seed[1], seed[2]],
+        r["lower"].as_f64().unwrap() as f32,
+        r["upper"].as_f64().unwrap() as f32,
+    )
+    .unwrap();
+    assert_eq!(count(&ours), r["mask_voxels"].as_u64().unwrap() as usize);
+    assert_eq!(ours.data, want);
+}

@@ -97,7 +97,7 @@ pub fn ct_from_mask(mask: &Volume<f32>, opts: &FromMaskOptions) -> Result<MaskPh
     let truth = frac.map(|f| u8::from(f >= 0.5));
     let wall = dilate(&truth, opts.wall_thickness_mm);
     let dims = frac.dims;
-    let [nx, ny, nz] = dims;
+    let [nx, ny, _] = dims;
     // A body outline fits when an ellipse of 45 % x 38 % of the field of view around the grid
     // centre keeps 25 mm between the airway and a 10 mm chest wall; only for axial grids.
     let sp = frac.spacing();
