@@ -17,6 +17,7 @@ fn main() -> anyhow::Result<()> {
         opts.spacing_mm = [0.7, 0.7, 0.5];
     }
     let ph = make_ct_phantom(&opts)?;
+    let seed = bronchosim::volume::seed::find_trachea_seed(&ph.ct, &Default::default())?;
     let data: Vec<u8> = ph
         .ct
         .data
@@ -31,6 +32,7 @@ fn main() -> anyhow::Result<()> {
         "dtype": "int16",
         "truth_volume_ml": ph.truth_volume_ml,
         "branches": ph.tree.branches.len(),
+        "seed_voxel": seed.voxel,
     });
     std::fs::write(
         format!("{prefix}.json"),

@@ -243,12 +243,11 @@ pub fn make_ct_phantom(opts: &CtPhantomOptions) -> Result<CtPhantom> {
                             } else if ((p.x - centre[0]) / ia).powi(2)
                                 + ((p.y - centre[1]) / ib).powi(2)
                                 > 1.0
+                                || (z > carina_z - 10.0
+                                    && ((p.x - tr_xy.x).powi(2) + (p.y - tr_xy.y).powi(2)).sqrt()
+                                        < trachea.radius_start_mm + 12.0)
                             {
-                                opts.hu_tissue
-                            } else if z > carina_z - 10.0
-                                && ((p.x - tr_xy.x).powi(2) + (p.y - tr_xy.y).powi(2)).sqrt()
-                                    < trachea.radius_start_mm + 12.0
-                            {
+                                // Chest wall, or mediastinum around the trachea.
                                 opts.hu_tissue
                             } else {
                                 opts.hu_lung + opts.lung_texture_hu * texture.at(&p) as f32

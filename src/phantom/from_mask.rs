@@ -74,8 +74,12 @@ pub fn ct_from_mask_file(path: &Path, opts: &FromMaskOptions) -> Result<MaskPhan
 
 /// Make a CT-like volume from a mask (lumen where the value exceeds 0.5).
 pub fn ct_from_mask(mask: &Volume<f32>, opts: &FromMaskOptions) -> Result<MaskPhantom> {
-    if opts.downsample == 0 || !(opts.wall_thickness_mm >= 0.0) || !(opts.blur_sigma_voxels >= 0.0)
-    {
+    // Written negated so NaN options are rejected too.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    let bad = opts.downsample == 0
+        || !(opts.wall_thickness_mm >= 0.0)
+        || !(opts.blur_sigma_voxels >= 0.0);
+    if bad {
         return Err(Error::Other(format!(
             "mask phantom: need downsample >= 1, wall and blur >= 0 (got {opts:?})"
         )));

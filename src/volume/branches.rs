@@ -214,7 +214,7 @@ mod tests {
                     let inside = if zc < 15 {
                         (i as i64 - 20).abs() <= 3
                     } else {
-                        let off = (zc - 15) as i64;
+                        let off = zc - 15;
                         (i as i64 - 20 - off).abs() <= 3 || (i as i64 - 20 + off).abs() <= 3
                     };
                     if inside {

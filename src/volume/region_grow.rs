@@ -63,6 +63,7 @@ pub fn flood_fill(
         ];
         for nrow in neighbours.into_iter().flatten() {
             let mut in_run = false;
+            #[allow(clippy::needless_range_loop)] // `pass` takes the linear index
             for n in nrow + l..=nrow + r {
                 if label[n] == 0 {
                     if pass(n) {
@@ -184,7 +185,11 @@ pub fn grow_adaptive(
     opts: &AdaptiveOptions,
 ) -> Result<AdaptiveGrowth> {
     check_seed(vol, seed)?;
-    if !(opts.step_hu > 0.0) || !(opts.max_hu >= opts.start_hu) || !(opts.leak_growth_limit > 1.0) {
+    // Written negated so NaN options are rejected too.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    let bad =
+        !(opts.step_hu > 0.0) || !(opts.max_hu >= opts.start_hu) || !(opts.leak_growth_limit > 1.0);
+    if bad {
         return Err(Error::Other(format!(
             "region growing: need step_hu > 0, max_hu >= start_hu and leak_growth_limit > 1 (got {opts:?})"
         )));
