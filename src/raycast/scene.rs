@@ -1,0 +1,125 @@
+//! [`Scene`]: a lumen mesh ready for ray queries (BVH, vertex normals) and the query API.
+
+use super::bvh::Bvh4;
+use super::bvh_build::{build, MAX_DEPTH};
+use crate::mesh::TriMesh;
+use crate::{Error, Result};
+use rayon::prelude::*;
+
+/// A ray–surface hit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the ray (mm when the direction is a unit vector).
+    pub t: f32,
+    /// Index of the triangle hit, in the input [`TriMesh`].
+    pub tri: u32,
+    /// Barycentric weight of the triangle's second vertex.
+    pub u: f32,
+    /// Barycentric weight of the triangle's third vertex (the first has `1 - u - v`).
+    pub v: f32,
+}
+
+/// A triangle mesh prepared for ray casting: a four-wide BVH, the triangles and the
+/// area-weighted unit vertex normals. Geometry is f32, world mm.
+pub struct Scene {
+    bvh: Bvh4,
+    /// Vertex positions (mm).
+    pub positions: Vec<[f32; 3]>,
+    /// Vertex indices per triangle.
+    pub triangles: Vec<[u32; 3]>,
+    /// Unit vertex normals (area weighted; zero for isolated vertices).
+    pub normals: Vec<[f32; 3]>,
+}
+
+impl Scene {
+    /// Build the BVH (parallel, binned SAH) and the vertex normals of `mesh`.
+    ///
+    /// Fails when a triangle indexes a missing vertex, a used vertex is not finite, or the
+    /// tree would be deeper than the traversal supports.
+    pub fn new(mesh: &TriMesh) -> Result<Scene> {
+        let nv = mesh.positions.len();
+        let positions: Vec<[f32; 3]> = mesh.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
+        let mut tris = Vec::with_capacity(mesh.triangles.len());
+        for (i, t) in mesh.triangles.iter().enumerate() {
+            if t.iter().any(|&v| v as usize >= nv) {
+                return Err(Error::Other(format!(
+                    "mesh: triangle {i} indexes vertex {t:?} but the mesh has {nv} vertices"
+                )));
+            }
+            let v = t.map(|k| positions[k as usize]);
+            if v.iter().flatten().any(|c| !c.is_finite()) {
+                return Err(Error::Other(format!("mesh: triangle {i} has a non-finite vertex")));
+            }
+            tris.push(v);
+        }
+        let bvh = build(&tris).ok_or_else(|| {
+            Error::Other(format!(
+                "mesh: BVH deeper than {MAX_DEPTH} levels ({} triangles); degenerate geometry?",
+                tris.len()
+            ))
+        })?;
+        let normals = mesh.vertex_normals().iter().map(|n| [n.x, n.y, n.z]).collect();
+        Ok(Scene { bvh, positions, triangles: mesh.triangles.clone(), normals })
+    }
+
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Nearest hit with `0 < t < tmax` of the ray `origin + t dir` (mm; `dir` need not be
+    /// unit, `t` is in units of `dir`). Triangles are two-sided.
+    #[inline]
+    pub fn closest_hit(&self, origin: [f32; 3], dir: [f32; 3], tmax: f32) -> Option<Hit> {
+        self.bvh
+            .closest_hit(origin, dir, tmax)
+            .map(|h| Hit { t: h.t, tri: h.tri, u: h.u, v: h.v })
+    }
+
+    /// True when anything is hit with `0 < t < tmax` (visibility query; no ordering).
+    #[inline]
+    pub fn any_hit(&self, origin: [f32; 3], dir: [f32; 3], tmax: f32) -> bool {
+        self.bvh.any_hit(origin, dir, tmax)
+    }
+
+    /// [`Scene::closest_hit`] for many rays in parallel; `origins` and `dirs` have equal length.
+    pub fn closest_hits(&self, origins: &[[f32; 3]], dirs: &[[f32; 3]], tmax: f32) -> Vec<Option<Hit>> {
+        origins
+            .par_iter()
+            .zip(dirs.par_iter())
+            .with_min_len(256)
+            .map(|(o, d)| self.closest_hit(*o, *d, tmax))
+            .collect()
+    }
+
+    /// [`Scene::any_hit`] for many rays in parallel, each with its own `tmax`.
+    pub fn any_hits(&self, origins: &[[f32; 3]], dirs: &[[f32; 3]], tmax: &[f32]) -> Vec<bool> {
+        origins
+            .par_iter()
+            .zip(dirs.par_iter())
+            .zip(tmax.par_iter())
+            .with_min_len(256)
+            .map(|((o, d), t)| self.any_hit(*o, *d, *t))
+            .collect()
+    }
+
+    /// Interpolated unit vertex normal at barycentrics (u, v) of triangle `tri` (not flipped).
+    #[inline]
+    pub fn shading_normal(&self, tri: u32, u: f32, v: f32) -> [f32; 3] {
+        let [a, b, c] = self.triangles[tri as usize];
+        let (na, nb, nc) =
+            (self.normals[a as usize], self.normals[b as usize], self.normals[c as usize]);
+        let w = 1.0 - u - v;
+        let n = [
+            w * na[0] + u * nb[0] + v * nc[0],
+            w * na[1] + u * nb[1] + v * nc[1],
+            w * na[2] + u * nb[2] + v * nc[2],
+        ];
+        let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if l > 0.0 {
+            [n[0] / l, n[1] / l, n[2] / l]
+        } else {
+            n
+        }
+    }
+}
