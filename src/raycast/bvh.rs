@@ -36,7 +36,7 @@ struct TravRay {
     near: [usize; 3],
     far: [usize; 3],
     inv: [f32x4; 3],
-    org_inv: [f32x4; 3],
+    org: [f32x4; 3],
     shear: ShearedRay,
 }
 
@@ -48,28 +48,43 @@ impl TravRay {
     #[inline(always)]
     fn new(org: [f32; 3], dir: [f32; 3]) -> Self {
         let mut inv = [f32x4::splat(0.0); 3];
-        let mut org_inv = [f32x4::splat(0.0); 3];
+        let mut org4 = [f32x4::splat(0.0); 3];
         let mut near = [0; 3];
         let mut far = [0; 3];
         for a in 0..3 {
             // A zero component becomes a tiny one so that (box - org) * inv never makes 0 * inf.
-            let d = if dir[a] == 0.0 { 1e-30f32.copysign(dir[a]) } else { dir[a] };
+            let d = if dir[a] == 0.0 {
+                1e-30f32.copysign(dir[a])
+            } else {
+                dir[a]
+            };
             let i = 1.0 / d;
             inv[a] = f32x4::splat(i);
-            org_inv[a] = f32x4::splat(org[a] * i);
+            org4[a] = f32x4::splat(org[a]);
             let neg = (d < 0.0) as usize;
             near[a] = a + 3 * neg;
             far[a] = a + 3 * (1 - neg);
         }
-        TravRay { near, far, inv, org_inv, shear: ShearedRay::new(org, dir) }
+        TravRay {
+            near,
+            far,
+            inv,
+            org: org4,
+            shear: ShearedRay::new(org, dir),
+        }
     }
 
     /// Entry distances of the four child boxes and the mask of those entered before `tmax`.
     #[inline(always)]
     fn boxes(&self, n: &Node4, tmax: f32) -> (f32x4, i32) {
-        let t = |p: usize, a: usize| n.b[p] * self.inv[a] - self.org_inv[a];
-        let tn = t(self.near[0], 0).fast_max(t(self.near[1], 1)).fast_max(t(self.near[2], 2));
-        let tf = t(self.far[0], 0).fast_min(t(self.far[1], 1)).fast_min(t(self.far[2], 2));
+        // (b - o) * inv, not b * inv - o * inv: its rounding error is relative to t (Ize 2013).
+        let t = |p: usize, a: usize| (n.b[p] - self.org[a]) * self.inv[a];
+        let tn = t(self.near[0], 0)
+            .fast_max(t(self.near[1], 1))
+            .fast_max(t(self.near[2], 2));
+        let tf = t(self.far[0], 0)
+            .fast_min(t(self.far[1], 1))
+            .fast_min(t(self.far[2], 2));
         let tn = tn.fast_max(f32x4::splat(0.0));
         let tf = (tf * f32x4::splat(FAR_SCALE)).fast_min(f32x4::splat(tmax));
         (tn, tn.cmp_le(tf).move_mask())
@@ -144,7 +159,12 @@ impl Bvh4 {
                 let tri = &self.leaves[(node & !LEAF) as usize];
                 if let Some((lane, t, u, v)) = intersect4(&ray.shear, tri, tbest) {
                     tbest = t;
-                    best = Some(RawHit { t, tri: tri.id[lane], u, v });
+                    best = Some(RawHit {
+                        t,
+                        tri: tri.id[lane],
+                        u,
+                        v,
+                    });
                 }
             }
             // Pop the next entry that can still hold a nearer hit.

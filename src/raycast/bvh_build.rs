@@ -21,7 +21,10 @@ struct Aabb {
 }
 
 impl Aabb {
-    const EMPTY: Aabb = Aabb { min: [f32::INFINITY; 3], max: [f32::NEG_INFINITY; 3] };
+    const EMPTY: Aabb = Aabb {
+        min: [f32::INFINITY; 3],
+        max: [f32::NEG_INFINITY; 3],
+    };
     #[inline]
     fn grow(&mut self, o: &Aabb) {
         for a in 0..3 {
@@ -38,7 +41,11 @@ impl Aabb {
     }
     #[inline]
     fn half_area(&self) -> f32 {
-        let d = [self.max[0] - self.min[0], self.max[1] - self.min[1], self.max[2] - self.min[2]];
+        let d = [
+            self.max[0] - self.min[0],
+            self.max[1] - self.min[1],
+            self.max[2] - self.min[2],
+        ];
         if d[0] < 0.0 {
             return 0.0;
         }
@@ -48,8 +55,15 @@ impl Aabb {
 
 /// A binary build node.
 enum BNode {
-    Leaf { bbox: Aabb, start: usize, count: usize },
-    Inner { bbox: Aabb, kids: Box<[BNode; 2]> },
+    Leaf {
+        bbox: Aabb,
+        start: usize,
+        count: usize,
+    },
+    Inner {
+        bbox: Aabb,
+        kids: Box<[BNode; 2]>,
+    },
 }
 
 impl BNode {
@@ -85,7 +99,11 @@ pub(crate) fn build(tris: &[[[f32; 3]; 3]]) -> Option<Bvh4> {
                 0.5 * (b.min[1] + b.max[1]),
                 0.5 * (b.min[2] + b.max[2]),
             ];
-            Prim { bbox: b, centroid: c, id: i as u32 }
+            Prim {
+                bbox: b,
+                centroid: c,
+                id: i as u32,
+            }
         })
         .collect();
     let root = build_rec(&mut prims, 0);
@@ -114,7 +132,11 @@ fn build_rec(prims: &mut [Prim], offset: usize) -> BNode {
     let n = prims.len();
     // A leaf block tests four triangles at the cost of about one: never split below four.
     if n <= MAX_LEAF {
-        return BNode::Leaf { bbox, start: offset, count: n };
+        return BNode::Leaf {
+            bbox,
+            start: offset,
+            count: n,
+        };
     }
     let mid = match best_split(prims, &cbox) {
         Some((axis, bin, _)) => {
@@ -136,7 +158,10 @@ fn build_rec(prims: &mut [Prim], offset: usize) -> BNode {
     } else {
         (build_rec(l, offset), build_rec(r, offset + mid))
     };
-    BNode::Inner { bbox, kids: Box::new([a, b]) }
+    BNode::Inner {
+        bbox,
+        kids: Box::new([a, b]),
+    }
 }
 
 #[inline]
@@ -208,7 +233,10 @@ fn empty_node() -> Node4 {
     for v in &mut b[3..] {
         *v = f32x4::splat(f32::NEG_INFINITY);
     }
-    Node4 { b, child: [EMPTY; 4] }
+    Node4 {
+        b,
+        child: [EMPTY; 4],
+    }
 }
 
 fn set_child(n: &mut Node4, j: usize, bbox: &Aabb, handle: u32) {
@@ -244,7 +272,9 @@ fn collapse(
     prims: &[Prim],
     depth: usize,
 ) -> usize {
-    let BNode::Inner { kids, .. } = b else { unreachable!("collapse is called on inner nodes") };
+    let BNode::Inner { kids, .. } = b else {
+        unreachable!("collapse is called on inner nodes")
+    };
     let mut open: Vec<&BNode> = vec![&kids[0], &kids[1]];
     while open.len() < 4 {
         // Open the inner child with the largest surface area (most likely to be entered).
@@ -255,7 +285,9 @@ fn collapse(
             .max_by(|x, y| x.1.bbox().half_area().total_cmp(&y.1.bbox().half_area()))
             .map(|(i, _)| i);
         let Some(i) = pick else { break };
-        let BNode::Inner { kids, .. } = open.swap_remove(i) else { unreachable!() };
+        let BNode::Inner { kids, .. } = open.swap_remove(i) else {
+            unreachable!()
+        };
         open.push(&kids[0]);
         open.push(&kids[1]);
     }
@@ -264,7 +296,9 @@ fn collapse(
     let mut deepest = depth;
     for (j, c) in open.iter().enumerate() {
         let h = match c {
-            BNode::Leaf { start, count, .. } => push_leaf(out, tris, &prims[*start..*start + *count]),
+            BNode::Leaf { start, count, .. } => {
+                push_leaf(out, tris, &prims[*start..*start + *count])
+            }
             BNode::Inner { .. } => {
                 let h = out.nodes.len() as u32;
                 deepest = deepest.max(collapse(c, out, tris, prims, depth + 1));

@@ -30,7 +30,11 @@ impl RayTable {
                 [d.x as f32, d.y as f32, d.z as f32]
             })
             .collect();
-        RayTable { width: camera.width, height: camera.height, dirs }
+        RayTable {
+            width: camera.width,
+            height: camera.height,
+            dirs,
+        }
     }
 }
 
@@ -101,9 +105,8 @@ pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine)
     let m = camera_to_world;
     let org = [m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32];
     let r = |d: &[f32; 3]| -> [f32; 3] {
-        let v = [0, 1, 2].map(|i| {
-            m[(i, 0)] * d[0] as f64 + m[(i, 1)] * d[1] as f64 + m[(i, 2)] * d[2] as f64
-        });
+        let v = [0, 1, 2]
+            .map(|i| m[(i, 0)] * d[0] as f64 + m[(i, 1)] * d[1] as f64 + m[(i, 2)] * d[2] as f64);
         let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
         [(v[0] / l) as f32, (v[1] / l) as f32, (v[2] / l) as f32]
     };
@@ -113,8 +116,14 @@ pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine)
         .with_min_len(512)
         .map(|d| {
             let dir = r(d);
-            let Some(h) = scene.closest_hit(org, dir, f32::INFINITY) else { return MISS };
-            let point = [org[0] + h.t * dir[0], org[1] + h.t * dir[1], org[2] + h.t * dir[2]];
+            let Some(h) = scene.closest_hit(org, dir, f32::INFINITY) else {
+                return MISS;
+            };
+            let point = [
+                org[0] + h.t * dir[0],
+                org[1] + h.t * dir[1],
+                org[2] + h.t * dir[2],
+            ];
             let mut n = scene.shading_normal(h.tri, h.u, h.v);
             // V points from the surface to the viewpoint, i.e. -dir.
             let mut gamma = -(n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2]);
@@ -122,7 +131,14 @@ pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine)
                 n = [-n[0], -n[1], -n[2]];
                 gamma = -gamma;
             }
-            Px { z: h.t, point, normal: n, gamma: gamma.min(1.0), tri: h.tri, bary: [h.u, h.v] }
+            Px {
+                z: h.t,
+                point,
+                normal: n,
+                gamma: gamma.min(1.0),
+                tri: h.tri,
+                bary: [h.u, h.v],
+            }
         })
         .collect();
     let mut g = GBuffer {

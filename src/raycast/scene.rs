@@ -48,7 +48,9 @@ impl Scene {
             }
             let v = t.map(|k| positions[k as usize]);
             if v.iter().flatten().any(|c| !c.is_finite()) {
-                return Err(Error::Other(format!("mesh: triangle {i} has a non-finite vertex")));
+                return Err(Error::Other(format!(
+                    "mesh: triangle {i} has a non-finite vertex"
+                )));
             }
             tris.push(v);
         }
@@ -58,8 +60,17 @@ impl Scene {
                 tris.len()
             ))
         })?;
-        let normals = mesh.vertex_normals().iter().map(|n| [n.x, n.y, n.z]).collect();
-        Ok(Scene { bvh, positions, triangles: mesh.triangles.clone(), normals })
+        let normals = mesh
+            .vertex_normals()
+            .iter()
+            .map(|n| [n.x, n.y, n.z])
+            .collect();
+        Ok(Scene {
+            bvh,
+            positions,
+            triangles: mesh.triangles.clone(),
+            normals,
+        })
     }
 
     /// Number of triangles.
@@ -71,9 +82,12 @@ impl Scene {
     /// unit, `t` is in units of `dir`). Triangles are two-sided.
     #[inline]
     pub fn closest_hit(&self, origin: [f32; 3], dir: [f32; 3], tmax: f32) -> Option<Hit> {
-        self.bvh
-            .closest_hit(origin, dir, tmax)
-            .map(|h| Hit { t: h.t, tri: h.tri, u: h.u, v: h.v })
+        self.bvh.closest_hit(origin, dir, tmax).map(|h| Hit {
+            t: h.t,
+            tri: h.tri,
+            u: h.u,
+            v: h.v,
+        })
     }
 
     /// True when anything is hit with `0 < t < tmax` (visibility query; no ordering).
@@ -83,7 +97,12 @@ impl Scene {
     }
 
     /// [`Scene::closest_hit`] for many rays in parallel; `origins` and `dirs` have equal length.
-    pub fn closest_hits(&self, origins: &[[f32; 3]], dirs: &[[f32; 3]], tmax: f32) -> Vec<Option<Hit>> {
+    pub fn closest_hits(
+        &self,
+        origins: &[[f32; 3]],
+        dirs: &[[f32; 3]],
+        tmax: f32,
+    ) -> Vec<Option<Hit>> {
         origins
             .par_iter()
             .zip(dirs.par_iter())
@@ -107,8 +126,11 @@ impl Scene {
     #[inline]
     pub fn shading_normal(&self, tri: u32, u: f32, v: f32) -> [f32; 3] {
         let [a, b, c] = self.triangles[tri as usize];
-        let (na, nb, nc) =
-            (self.normals[a as usize], self.normals[b as usize], self.normals[c as usize]);
+        let (na, nb, nc) = (
+            self.normals[a as usize],
+            self.normals[b as usize],
+            self.normals[c as usize],
+        );
         let w = 1.0 - u - v;
         let n = [
             w * na[0] + u * nb[0] + v * nc[0],

@@ -43,7 +43,11 @@ impl ShearedRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         let sz = 1.0 / dir[kz];
-        ShearedRay { org, k: [kx, ky, kz], s: [dir[kx] * sz, dir[ky] * sz, sz] }
+        ShearedRay {
+            org,
+            k: [kx, ky, kz],
+            s: [dir[kx] * sz, dir[ky] * sz, sz],
+        }
     }
 }
 
@@ -61,8 +65,9 @@ pub struct TriHit {
 /// Edge functions in f64, used when the f32 ones are exactly zero (paper, section 3).
 #[inline(never)]
 fn edges_f64(ax: f32, ay: f32, bx: f32, by: f32, cx: f32, cy: f32) -> (f32, f32, f32) {
-    let (ax, ay, bx, by, cx, cy) =
-        (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+    let (ax, ay, bx, by, cx, cy) = (
+        ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
+    );
     (
         (cx * by - cy * bx) as f32,
         (ax * cy - ay * cx) as f32,
@@ -106,7 +111,11 @@ pub fn intersect(
     if !(t > 0.0 && t < tmax) {
         return None;
     }
-    Some(TriHit { t, u: v / det, v: w / det })
+    Some(TriHit {
+        t,
+        u: v / det,
+        v: w / det,
+    })
 }
 
 /// Four triangles in structure-of-arrays form: `v[vertex][axis]` holds one lane per triangle.
@@ -129,7 +138,11 @@ pub fn intersect4(ray: &ShearedRay, tri: &Tri4, tmax: f32) -> Option<(usize, f32
         f32x4::splat(ray.org[ky]),
         f32x4::splat(ray.org[kz]),
     );
-    let (sx, sy, sz) = (f32x4::splat(ray.s[0]), f32x4::splat(ray.s[1]), f32x4::splat(ray.s[2]));
+    let (sx, sy, sz) = (
+        f32x4::splat(ray.s[0]),
+        f32x4::splat(ray.s[1]),
+        f32x4::splat(ray.s[2]),
+    );
     let az = tri.v[0][kz] - oz;
     let bz = tri.v[1][kz] - oz;
     let cz = tri.v[2][kz] - oz;

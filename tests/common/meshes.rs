@@ -41,15 +41,40 @@ impl Rng {
 pub fn icosphere(r: f32, levels: u32) -> TriMesh {
     let t = (1.0 + 5f32.sqrt()) / 2.0;
     let mut p: Vec<[f32; 3]> = vec![
-        [-1., t, 0.], [1., t, 0.], [-1., -t, 0.], [1., -t, 0.],
-        [0., -1., t], [0., 1., t], [0., -1., -t], [0., 1., -t],
-        [t, 0., -1.], [t, 0., 1.], [-t, 0., -1.], [-t, 0., 1.],
+        [-1., t, 0.],
+        [1., t, 0.],
+        [-1., -t, 0.],
+        [1., -t, 0.],
+        [0., -1., t],
+        [0., 1., t],
+        [0., -1., -t],
+        [0., 1., -t],
+        [t, 0., -1.],
+        [t, 0., 1.],
+        [-t, 0., -1.],
+        [-t, 0., 1.],
     ];
     let mut f: Vec<[u32; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     let norm = |v: [f32; 3]| {
         let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
@@ -80,7 +105,10 @@ pub fn icosphere(r: f32, levels: u32) -> TriMesh {
         f = nf;
     }
     TriMesh {
-        positions: p.iter().map(|v| Point3::new(v[0] * r, v[1] * r, v[2] * r)).collect(),
+        positions: p
+            .iter()
+            .map(|v| Point3::new(v[0] * r, v[1] * r, v[2] * r))
+            .collect(),
         triangles: f,
     }
 }
@@ -99,7 +127,11 @@ pub fn add_tube(
     let len = dot(axis, axis).sqrt();
     let w = scale(axis, 1.0 / len);
     // Any unit vector perpendicular to w, then e2 = w x e1 so (e1, e2, w) is right handed.
-    let helper = if w[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+    let helper = if w[0].abs() < 0.9 {
+        [1.0, 0.0, 0.0]
+    } else {
+        [0.0, 1.0, 0.0]
+    };
     let e1 = normalize(cross(helper, w));
     let e2 = cross(w, e1);
     let base = m.positions.len() as u32;
@@ -128,7 +160,8 @@ pub fn add_tube(
 
 /// Close the ring of `segs` vertices starting at `first` with a fan around a new centre vertex.
 pub fn add_cap(m: &mut TriMesh, first: u32, segs: u32, centre: [f32; 3]) {
-    m.positions.push(Point3::new(centre[0], centre[1], centre[2]));
+    m.positions
+        .push(Point3::new(centre[0], centre[1], centre[2]));
     let c = (m.positions.len() - 1) as u32;
     for j in 0..segs {
         m.triangles.push([c, first + j, first + (j + 1) % segs]);
@@ -204,17 +237,24 @@ pub fn bench_scene() -> (TriMesh, BenchRays, BenchRays) {
     let fwd = normalize([0.1, 0.05, 1.0]);
     let right = normalize(cross([0.0, 1.0, 0.0], fwd));
     let down = cross(fwd, right);
-    let mut cam = BenchRays { origins: Vec::new(), dirs: Vec::new() };
+    let mut cam = BenchRays {
+        origins: Vec::new(),
+        dirs: Vec::new(),
+    };
     for v in 0..w {
         for u in 0..w {
             let x = (u as f32 - 255.5) / f;
             let y = (v as f32 - 255.5) / f;
             cam.origins.push(org);
-            cam.dirs.push(normalize(add(add(scale(right, x), scale(down, y)), fwd)));
+            cam.dirs
+                .push(normalize(add(add(scale(right, x), scale(down, y)), fwd)));
         }
     }
     let mut rng = Rng(7);
-    let mut rnd = BenchRays { origins: Vec::new(), dirs: Vec::new() };
+    let mut rnd = BenchRays {
+        origins: Vec::new(),
+        dirs: Vec::new(),
+    };
     for _ in 0..262_144 {
         let (p0, p1, r) = branches[(rng.next_u64() % branches.len() as u64) as usize];
         let c = add(p0, scale(sub(p1, p0), rng.range(0.2, 0.9)));
@@ -261,7 +301,11 @@ pub fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 pub fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 pub fn normalize(a: [f32; 3]) -> [f32; 3] {
     scale(a, 1.0 / dot(a, a).sqrt())
