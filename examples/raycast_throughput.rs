@@ -14,7 +14,11 @@ use std::time::Instant;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::env::args().nth(1).map(std::path::PathBuf::from);
-    let repeats: usize = std::env::args().nth(2).map(|s| s.parse()).transpose()?.unwrap_or(5);
+    let repeats: usize = std::env::args()
+        .nth(2)
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(5);
     let (mesh, cam, rnd) = meshes::bench_scene();
     let t0 = Instant::now();
     let scene = Scene::new(&mesh)?;
@@ -34,7 +38,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             rays.dirs.len() as f64 / best / 1e6
         ));
         if let Some(d) = &dir {
-            let mut w = std::io::BufWriter::new(std::fs::File::create(d.join(format!("ours_{name}.bin")))?);
+            let mut w =
+                std::io::BufWriter::new(std::fs::File::create(d.join(format!("ours_{name}.bin")))?);
             for h in &hits {
                 let id = h.map_or(-1i32, |h| h.tri as i32);
                 w.write_all(&id.to_le_bytes())?;
