@@ -73,6 +73,16 @@ impl Scene {
         })
     }
 
+    /// BVH size for diagnostics: inner nodes, leaf blocks of four triangles, and bytes.
+    pub fn stats(&self) -> String {
+        let (n, l) = (self.bvh.nodes.len(), self.bvh.leaves.len());
+        format!(
+            "{n} nodes, {l} leaf blocks ({:.2} triangles per block), {:.1} MB",
+            self.triangles.len() as f64 / l.max(1) as f64,
+            (n * std::mem::size_of::<super::bvh::Node4>() + l * std::mem::size_of::<super::triangle::Tri4>()) as f64 / 1e6
+        )
+    }
+
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
         self.triangles.len()
