@@ -13,7 +13,10 @@ use std::io::Write;
 use std::time::Instant;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let dir = std::env::args().nth(1).filter(|s| !s.is_empty()).map(std::path::PathBuf::from);
+    let dir = std::env::args()
+        .nth(1)
+        .filter(|s| !s.is_empty())
+        .map(std::path::PathBuf::from);
     let repeats: usize = std::env::args()
         .nth(2)
         .map(|s| s.parse())

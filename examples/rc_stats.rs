@@ -16,10 +16,15 @@ fn main() {
         for _ in 0..5 {
             let t0 = cpu_ns();
             for (o, d) in r.origins.iter().zip(&r.dirs) {
-                sum += scene.closest_hit(*o, *d, f32::INFINITY).map_or(0.0, |h| h.t);
+                sum += scene
+                    .closest_hit(*o, *d, f32::INFINITY)
+                    .map_or(0.0, |h| h.t);
             }
             best = best.min((cpu_ns() - t0) as f64 * 1e-9);
         }
-        println!("{name}: {:.3} Mrays/s CPU-time ({sum:.0})", r.dirs.len() as f64 / best / 1e6);
+        println!(
+            "{name}: {:.3} Mrays/s CPU-time ({sum:.0})",
+            r.dirs.len() as f64 / best / 1e6
+        );
     }
 }

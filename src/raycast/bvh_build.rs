@@ -1,9 +1,8 @@
-//! Building a [`Bvh4`]: a binary tree by binned SAH (parallel over subtrees with rayon), then
-//! collapsed to four-wide nodes by repeatedly opening the child with the largest surface area.
+//! Building a [`Bvh`]: a binary tree by binned SAH (parallel over subtrees with rayon), then
+//! collapsed to W-wide nodes by repeatedly opening the child with the largest surface area.
 
-use super::bvh::{Bvh4, Node4, EMPTY, LEAF};
+use super::bvh::{Bvh, Node, EMPTY, LEAF, STACK};
 use super::triangle::Tri4;
-use wide::f32x4;
 
 /// Most triangles in a leaf (one [`Tri4`] block).
 const MAX_LEAF: usize = 4;
@@ -11,8 +10,6 @@ const MAX_LEAF: usize = 4;
 const BINS: usize = 16;
 /// Subtrees smaller than this are built on the current thread.
 const PAR_MIN: usize = 4096;
-/// Deepest four-wide tree the fixed traversal stack can hold (3 pushes per level).
-pub(crate) const MAX_DEPTH: usize = 40;
 
 #[derive(Clone, Copy, Debug)]
 struct Aabb {
@@ -80,11 +77,11 @@ struct Prim {
     id: u32,
 }
 
-/// Build the four-wide BVH over triangles given as vertex triples (mm). Returns `None` when the
+/// Build the W-wide BVH over triangles given as vertex triples (mm). Returns `None` when the
 /// tree would be deeper than the traversal stack allows (pathological input).
-pub(crate) fn build(tris: &[[[f32; 3]; 3]]) -> Option<Bvh4> {
+pub(crate) fn build<const W: usize>(tris: &[[[f32; 3]; 3]]) -> Option<Bvh<W>> {
     if tris.is_empty() {
-        return Some(Bvh4::default());
+        return Some(Bvh::default());
     }
     let mut prims: Vec<Prim> = tris
         .iter()
@@ -107,7 +104,7 @@ pub(crate) fn build(tris: &[[[f32; 3]; 3]]) -> Option<Bvh4> {
         })
         .collect();
     let root = build_rec(&mut prims, 0);
-    let mut out = Bvh4::default();
+    let mut out = Bvh::<W>::default();
     let depth = match &root {
         BNode::Leaf { bbox, start, count } => {
             // A single leaf: wrap it in one node so traversal always starts at a node.
@@ -118,8 +115,8 @@ pub(crate) fn build(tris: &[[[f32; 3]; 3]]) -> Option<Bvh4> {
         }
         BNode::Inner { .. } => collapse(&root, &mut out, tris, &prims, 1),
     };
-    out.root = 0;
-    (depth <= MAX_DEPTH).then_some(out)
+    // Each level pushes at most W - 1 entries.
+    (depth * (W - 1) < STACK).then_some(out)
 }
 
 fn build_rec(prims: &mut [Prim], offset: usize) -> BNode {
@@ -230,26 +227,26 @@ fn partition(prims: &mut [Prim], left: impl Fn(&Prim) -> bool) -> usize {
     i
 }
 
-fn empty_node() -> Node4 {
-    let mut b = [f32x4::splat(f32::INFINITY); 6];
+fn empty_node<const W: usize>() -> Node<W> {
+    let mut b = [[f32::INFINITY; W]; 6];
     for v in &mut b[3..] {
-        *v = f32x4::splat(f32::NEG_INFINITY);
+        *v = [f32::NEG_INFINITY; W];
     }
-    Node4 {
+    Node {
         b,
-        child: [EMPTY; 4],
+        child: [EMPTY; W],
     }
 }
 
-fn set_child(n: &mut Node4, j: usize, bbox: &Aabb, handle: u32) {
+fn set_child<const W: usize>(n: &mut Node<W>, j: usize, bbox: &Aabb, handle: u32) {
     for a in 0..3 {
-        n.b[a].as_array_mut()[j] = bbox.min[a];
-        n.b[3 + a].as_array_mut()[j] = bbox.max[a];
+        n.b[a][j] = bbox.min[a];
+        n.b[3 + a][j] = bbox.max[a];
     }
     n.child[j] = handle;
 }
 
-fn push_leaf(out: &mut Bvh4, tris: &[[[f32; 3]; 3]], prims: &[Prim]) -> u32 {
+fn push_leaf<const W: usize>(out: &mut Bvh<W>, tris: &[[[f32; 3]; 3]], prims: &[Prim]) -> u32 {
     let mut t = Tri4::default();
     for j in 0..4 {
         // Padding lanes repeat the last triangle: a duplicate never changes the nearest hit.
@@ -266,10 +263,10 @@ fn push_leaf(out: &mut Bvh4, tris: &[[[f32; 3]; 3]], prims: &[Prim]) -> u32 {
     (out.leaves.len() - 1) as u32 | LEAF
 }
 
-/// Turn binary inner node `b` into a four-wide node; returns the depth of the subtree.
-fn collapse(
+/// Turn binary inner node `b` into a W-wide node; returns the depth of the subtree.
+fn collapse<const W: usize>(
     b: &BNode,
-    out: &mut Bvh4,
+    out: &mut Bvh<W>,
     tris: &[[[f32; 3]; 3]],
     prims: &[Prim],
     depth: usize,
@@ -278,7 +275,7 @@ fn collapse(
         unreachable!("collapse is called on inner nodes")
     };
     let mut open: Vec<&BNode> = vec![&kids[0], &kids[1]];
-    while open.len() < 4 {
+    while open.len() < W {
         // Open the inner child with the largest surface area (most likely to be entered).
         let pick = open
             .iter()

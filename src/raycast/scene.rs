@@ -1,7 +1,7 @@
 //! [`Scene`]: a lumen mesh ready for ray queries (BVH, vertex normals) and the query API.
 
-use super::bvh::Bvh4;
-use super::bvh_build::{build, MAX_DEPTH};
+use super::bvh::{Bvh, Node, RawHit};
+use super::bvh_build::build;
 use crate::mesh::TriMesh;
 use crate::{Error, Result};
 use rayon::prelude::*;
@@ -19,10 +19,18 @@ pub struct Hit {
     pub v: f32,
 }
 
+/// The BVH in the widest form the CPU runs well.
+enum Accel {
+    /// Four-wide, SSE (any CPU).
+    W4(Bvh<4>),
+    /// Eight-wide, AVX; only built when AVX2 was detected at run time.
+    W8(Bvh<8>),
+}
+
 /// A triangle mesh prepared for ray casting: a four-wide BVH, the triangles and the
 /// area-weighted unit vertex normals. Geometry is f32, world mm.
 pub struct Scene {
-    bvh: Bvh4,
+    bvh: Accel,
     /// Vertex positions (mm).
     pub positions: Vec<[f32; 3]>,
     /// Vertex indices per triangle.
@@ -37,6 +45,16 @@ impl Scene {
     /// Fails when a triangle indexes a missing vertex, a used vertex is not finite, or the
     /// tree would be deeper than the traversal supports.
     pub fn new(mesh: &TriMesh) -> Result<Scene> {
+        Self::build(mesh, wide8())
+    }
+
+    /// As [`Scene::new`] but always with the portable four-wide (SSE) BVH, whatever the CPU;
+    /// for comparisons and tests of that path.
+    pub fn new_four_wide(mesh: &TriMesh) -> Result<Scene> {
+        Self::build(mesh, false)
+    }
+
+    fn build(mesh: &TriMesh, eight_wide: bool) -> Result<Scene> {
         let nv = mesh.positions.len();
         let positions: Vec<[f32; 3]> = mesh.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
         let mut tris = Vec::with_capacity(mesh.triangles.len());
@@ -54,9 +72,14 @@ impl Scene {
             }
             tris.push(v);
         }
-        let bvh = build(&tris).ok_or_else(|| {
+        let bvh = if eight_wide {
+            build::<8>(&tris).map(Accel::W8)
+        } else {
+            build::<4>(&tris).map(Accel::W4)
+        }
+        .ok_or_else(|| {
             Error::Other(format!(
-                "mesh: BVH deeper than {MAX_DEPTH} levels ({} triangles); degenerate geometry?",
+                "mesh: BVH too deep for the traversal stack ({} triangles); degenerate geometry?",
                 tris.len()
             ))
         })?;
@@ -75,11 +98,24 @@ impl Scene {
 
     /// BVH size for diagnostics: inner nodes, leaf blocks of four triangles, and bytes.
     pub fn stats(&self) -> String {
-        let (n, l) = (self.bvh.nodes.len(), self.bvh.leaves.len());
+        let (w, n, l, nb) = match &self.bvh {
+            Accel::W4(b) => (
+                4,
+                b.nodes.len(),
+                b.leaves.len(),
+                std::mem::size_of::<Node<4>>(),
+            ),
+            Accel::W8(b) => (
+                8,
+                b.nodes.len(),
+                b.leaves.len(),
+                std::mem::size_of::<Node<8>>(),
+            ),
+        };
         format!(
-            "{n} nodes, {l} leaf blocks ({:.2} triangles per block), {:.1} MB",
+            "{w}-wide: {n} nodes, {l} leaf blocks ({:.2} triangles per block), {:.1} MB",
             self.triangles.len() as f64 / l.max(1) as f64,
-            (n * std::mem::size_of::<super::bvh::Node4>() + l * std::mem::size_of::<super::triangle::Tri4>()) as f64 / 1e6
+            (n * nb + l * std::mem::size_of::<super::triangle::Tri4>()) as f64 / 1e6
         )
     }
 
@@ -92,7 +128,15 @@ impl Scene {
     /// unit, `t` is in units of `dir`). Triangles are two-sided.
     #[inline]
     pub fn closest_hit(&self, origin: [f32; 3], dir: [f32; 3], tmax: f32) -> Option<Hit> {
-        self.bvh.closest_hit(origin, dir, tmax).map(|h| Hit {
+        let h: Option<RawHit> = match &self.bvh {
+            Accel::W4(b) => b.closest_hit(origin, dir, tmax),
+            // SAFETY: W8 is only built when AVX2 was detected.
+            #[cfg(target_arch = "x86_64")]
+            Accel::W8(b) => unsafe { b.closest_hit(origin, dir, tmax) },
+            #[cfg(not(target_arch = "x86_64"))]
+            Accel::W8(_) => unreachable!("eight-wide BVH is only built on x86_64"),
+        };
+        h.map(|h| Hit {
             t: h.t,
             tri: h.tri,
             u: h.u,
@@ -103,7 +147,14 @@ impl Scene {
     /// True when anything is hit with `0 < t < tmax` (visibility query; no ordering).
     #[inline]
     pub fn any_hit(&self, origin: [f32; 3], dir: [f32; 3], tmax: f32) -> bool {
-        self.bvh.any_hit(origin, dir, tmax)
+        match &self.bvh {
+            Accel::W4(b) => b.any_hit(origin, dir, tmax),
+            // SAFETY: W8 is only built when AVX2 was detected.
+            #[cfg(target_arch = "x86_64")]
+            Accel::W8(b) => unsafe { b.any_hit(origin, dir, tmax) },
+            #[cfg(not(target_arch = "x86_64"))]
+            Accel::W8(_) => unreachable!("eight-wide BVH is only built on x86_64"),
+        }
     }
 
     /// [`Scene::closest_hit`] for many rays in parallel; `origins` and `dirs` have equal length.
@@ -153,5 +204,18 @@ impl Scene {
         } else {
             n
         }
+    }
+}
+
+/// True when the eight-wide AVX traversal can run (x86_64 with AVX2, unless the environment
+/// variable BRONCHOSIM_BVH4 is set, which forces the portable four-wide BVH for comparison).
+fn wide8() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::env::var_os("BRONCHOSIM_BVH4").is_none() && is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
     }
 }
