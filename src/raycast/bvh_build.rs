@@ -31,10 +31,7 @@ impl Aabb {
     }
     #[inline]
     fn grow_p(&mut self, p: [f32; 3]) {
-        for a in 0..3 {
-            self.min[a] = self.min[a].min(p[a]);
-            self.max[a] = self.max[a].max(p[a]);
-        }
+        self.grow(&Aabb { min: p, max: p });
     }
     #[inline]
     fn half_area(&self) -> f32 {
@@ -172,7 +169,8 @@ fn best_split(prims: &[Prim], cbox: &Aabb) -> Option<(usize, usize, f32)> {
     for axis in 0..3 {
         let lo = cbox.min[axis];
         let ext = cbox.max[axis] - lo;
-        if !(ext > 0.0) {
+        // Also skips a NaN extent.
+        if ext.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             continue;
         }
         let scale = BINS as f32 / ext;
@@ -253,8 +251,8 @@ fn push_leaf<const W: usize>(out: &mut Bvh<W>, tris: &[[[f32; 3]; 3]], prims: &[
         let p = &prims[j.min(prims.len() - 1)];
         let tri = &tris[p.id as usize];
         for (i, vert) in tri.iter().enumerate() {
-            for a in 0..3 {
-                t.v[i][a].as_array_mut()[j] = vert[a];
+            for (lane, &c) in t.v[i].iter_mut().zip(vert) {
+                lane.as_array_mut()[j] = c;
             }
         }
         t.id[j] = p.id;

@@ -206,13 +206,10 @@ mod tests {
 
     fn tri4_of(tris: &[[[f32; 3]; 3]]) -> Tri4 {
         let mut t = Tri4::default();
-        for i in 0..3 {
-            for a in 0..3 {
-                let mut lanes = [0.0f32; 4];
-                for (j, l) in lanes.iter_mut().enumerate() {
-                    *l = tris[j.min(tris.len() - 1)][i][a];
-                }
-                t.v[i][a] = f32x4::from(lanes);
+        for (i, vert) in t.v.iter_mut().enumerate() {
+            for (a, axis) in vert.iter_mut().enumerate() {
+                let lanes: [f32; 4] = std::array::from_fn(|j| tris[j.min(tris.len() - 1)][i][a]);
+                *axis = f32x4::from(lanes);
             }
         }
         t

@@ -168,10 +168,13 @@ pub fn add_cap(m: &mut TriMesh, first: u32, segs: u32, centre: [f32; 3]) {
     }
 }
 
+/// A branch: centreline start, end (mm) and mean radius (mm).
+pub type Branch = ([f32; 3], [f32; 3], f32);
+
 /// A trachea-like tube splitting into two and then four bronchi, with smooth radius noise and
 /// closed far ends; edge length about `h` mm. Returns the mesh and the branch centrelines
 /// (start, end, mean radius) so callers can place cameras and ray origins inside.
-pub fn branching_airway(h: f32) -> (TriMesh, Vec<([f32; 3], [f32; 3], f32)>) {
+pub fn branching_airway(h: f32) -> (TriMesh, Vec<Branch>) {
     let mut branches = vec![([0.0, 0.0, 0.0], [0.0, 0.0, 100.0], 8.0f32)];
     let rot = |d: [f32; 3], ax: usize, ang: f32| -> [f32; 3] {
         let (c, s) = (ang.cos(), ang.sin());
