@@ -39,7 +39,7 @@ pub(crate) struct TravRay {
     near: [usize; 3],
     far: [usize; 3],
     inv: [f32; 3],
-    shear: ShearedRay,
+    pub(super) shear: ShearedRay,
 }
 
 /// Robust box test factor (Ize 2013): far distances are inflated by 1 + 2γ(3) so that rounding
@@ -74,12 +74,13 @@ impl TravRay {
 }
 
 /// Box tests of one node: entry distances and the mask of children entered before `tmax`.
-trait BoxTest<const W: usize> {
+pub(super) trait BoxTest<const W: usize> {
     fn boxes(&self, n: &Node<W>, tmax: f32) -> ([f32; W], u32);
 }
 
 /// SSE box test of four children.
-struct Sse {
+#[derive(Clone, Copy)]
+pub(super) struct Sse {
     ray: TravRay,
     org: [f32x4; 3],
     inv: [f32x4; 3],
@@ -105,7 +106,8 @@ impl BoxTest<4> for Sse {
 
 /// AVX box test of eight children (only constructed after AVX2 was detected).
 #[cfg(target_arch = "x86_64")]
-struct Avx {
+#[derive(Clone, Copy)]
+pub(super) struct Avx {
     ray: TravRay,
     org: [std::arch::x86_64::__m256; 3],
     inv: [std::arch::x86_64::__m256; 3],
@@ -163,7 +165,7 @@ pub struct RawHit {
 impl<const W: usize> Bvh<W> {
     /// Hint the cache to load a child (node or leaf) that traversal will visit soon.
     #[inline(always)]
-    fn prefetch(&self, h: u32) {
+    pub(super) fn prefetch(&self, h: u32) {
         #[cfg(target_arch = "x86_64")]
         unsafe {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
@@ -291,7 +293,7 @@ impl<const W: usize> Bvh<W> {
 }
 
 impl Bvh<4> {
-    fn sse(org: [f32; 3], dir: [f32; 3]) -> (Sse, TravRay) {
+    pub(super) fn sse(org: [f32; 3], dir: [f32; 3]) -> (Sse, TravRay) {
         let ray = TravRay::new(org, dir);
         let bt = Sse {
             ray,
@@ -323,7 +325,7 @@ impl Bvh<4> {
 #[cfg(target_arch = "x86_64")]
 impl Bvh<8> {
     #[inline(always)]
-    unsafe fn avx(org: [f32; 3], dir: [f32; 3]) -> (Avx, TravRay) {
+    pub(super) unsafe fn avx(org: [f32; 3], dir: [f32; 3]) -> (Avx, TravRay) {
         use std::arch::x86_64::_mm256_set1_ps;
         let ray = TravRay::new(org, dir);
         let bt = Avx {

@@ -8,6 +8,7 @@
 
 mod bvh;
 mod bvh_build;
+mod bvh_packet;
 mod gbuffer;
 mod scene;
 pub mod triangle;
