@@ -39,7 +39,7 @@ pub(crate) struct TravRay {
     near: [usize; 3],
     far: [usize; 3],
     inv: [f32; 3],
-    pub(super) shear: ShearedRay,
+    shear: ShearedRay,
 }
 
 /// Robust box test factor (Ize 2013): far distances are inflated by 1 + 2γ(3) so that rounding
@@ -74,13 +74,12 @@ impl TravRay {
 }
 
 /// Box tests of one node: entry distances and the mask of children entered before `tmax`.
-pub(super) trait BoxTest<const W: usize> {
+trait BoxTest<const W: usize> {
     fn boxes(&self, n: &Node<W>, tmax: f32) -> ([f32; W], u32);
 }
 
 /// SSE box test of four children.
-#[derive(Clone, Copy)]
-pub(super) struct Sse {
+struct Sse {
     ray: TravRay,
     org: [f32x4; 3],
     inv: [f32x4; 3],
@@ -106,8 +105,7 @@ impl BoxTest<4> for Sse {
 
 /// AVX box test of eight children (only constructed after AVX2 was detected).
 #[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy)]
-pub(super) struct Avx {
+struct Avx {
     ray: TravRay,
     org: [std::arch::x86_64::__m256; 3],
     inv: [std::arch::x86_64::__m256; 3],
@@ -165,7 +163,7 @@ pub struct RawHit {
 impl<const W: usize> Bvh<W> {
     /// Hint the cache to load a child (node or leaf) that traversal will visit soon.
     #[inline(always)]
-    pub(super) fn prefetch(&self, h: u32) {
+    fn prefetch(&self, h: u32) {
         #[cfg(target_arch = "x86_64")]
         unsafe {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
@@ -293,7 +291,7 @@ impl<const W: usize> Bvh<W> {
 }
 
 impl Bvh<4> {
-    pub(super) fn sse(org: [f32; 3], dir: [f32; 3]) -> (Sse, TravRay) {
+    fn sse(org: [f32; 3], dir: [f32; 3]) -> (Sse, TravRay) {
         let ray = TravRay::new(org, dir);
         let bt = Sse {
             ray,
@@ -325,7 +323,7 @@ impl Bvh<4> {
 #[cfg(target_arch = "x86_64")]
 impl Bvh<8> {
     #[inline(always)]
-    pub(super) unsafe fn avx(org: [f32; 3], dir: [f32; 3]) -> (Avx, TravRay) {
+    unsafe fn avx(org: [f32; 3], dir: [f32; 3]) -> (Avx, TravRay) {
         use std::arch::x86_64::_mm256_set1_ps;
         let ray = TravRay::new(org, dir);
         let bt = Avx {

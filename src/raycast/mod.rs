@@ -8,7 +8,6 @@
 
 mod bvh;
 mod bvh_build;
-mod bvh_packet;
 mod gbuffer;
 mod scene;
 pub mod triangle;

@@ -2,7 +2,6 @@
 
 use super::bvh::{Bvh, Node, RawHit};
 use super::bvh_build::build;
-use super::bvh_packet::P;
 use crate::mesh::TriMesh;
 use crate::{Error, Result};
 use rayon::prelude::*;
@@ -171,44 +170,6 @@ impl Scene {
             .with_min_len(256)
             .map(|(o, d)| self.closest_hit(*o, *d, tmax))
             .collect()
-    }
-
-    /// [`Scene::closest_hits`] for coherent rays (e.g. a camera's pixels in row order): runs of
-    /// eight consecutive rays are traced together as a packet. Results equal the single-ray ones.
-    pub fn closest_hits_coherent(
-        &self,
-        origins: &[[f32; 3]],
-        dirs: &[[f32; 3]],
-        tmax: f32,
-    ) -> Vec<Option<Hit>> {
-        let mut out = vec![None; origins.len()];
-        out.par_chunks_mut(P)
-            .zip(origins.par_chunks(P).zip(dirs.par_chunks(P)))
-            .with_min_len(32)
-            .for_each(|(out, (o, d))| {
-                if let (Ok(o), Ok(d)) = (<&[[f32; 3]; P]>::try_from(o), <&[[f32; 3]; P]>::try_from(d)) {
-                    out.copy_from_slice(&self.closest_hit_packet(o, d, tmax));
-                } else {
-                    for ((h, o), d) in out.iter_mut().zip(o).zip(d) {
-                        *h = self.closest_hit(*o, *d, tmax);
-                    }
-                }
-            });
-        out
-    }
-
-    /// Closest hits of a packet of eight rays traced together (see [`Scene::closest_hits_coherent`]).
-    #[inline]
-    pub fn closest_hit_packet(&self, origins: &[[f32; 3]; P], dirs: &[[f32; 3]; P], tmax: f32) -> [Option<Hit>; P] {
-        let h: [Option<RawHit>; P] = match &self.bvh {
-            Accel::W4(b) => b.closest_hit_packet(origins, dirs, tmax),
-            // SAFETY: W8 is only built when AVX2 was detected.
-            #[cfg(target_arch = "x86_64")]
-            Accel::W8(b) => unsafe { b.closest_hit_packet(origins, dirs, tmax) },
-            #[cfg(not(target_arch = "x86_64"))]
-            Accel::W8(_) => unreachable!("eight-wide BVH is only built on x86_64"),
-        };
-        h.map(|h| h.map(|h| Hit { t: h.t, tri: h.tri, u: h.u, v: h.v }))
     }
 
     /// [`Scene::any_hit`] for many rays in parallel, each with its own `tmax`.
