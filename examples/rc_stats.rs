@@ -10,6 +10,11 @@ fn main() {
     let (mesh, cam, rnd) = meshes::bench_scene();
     let scene = Scene::new(&mesh).unwrap();
     println!("{}", scene.stats());
+    if let Ok(s) = std::fs::read_to_string("/proc/self/smaps_rollup") {
+        s.lines()
+            .filter(|l| l.starts_with("AnonHuge"))
+            .for_each(|l| println!("{l}"));
+    }
     for (name, r) in [("camera", &cam), ("random", &rnd)] {
         let mut best = f64::INFINITY;
         let mut sum = 0.0f32;
