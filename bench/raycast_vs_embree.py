@@ -5,10 +5,13 @@ Same mesh (the procedural branching airway, ~300k triangles, written by
 `examples/write_bench_mesh.rs`) and the same rays: a 512x512 pinhole camera inside the
 trachea, and 262144 incoherent random rays from points inside the branches.
 
-embreex's `EmbreeScene.run` traces with one thread per call (a plain loop of rtcIntersect1);
-the "2 threads" figure runs two halves of the batch in two Python threads, which overlap
-only if embreex releases the GIL (the printed ratio to 1 thread shows whether it does).
+embreex's `EmbreeScene.run` traces the whole batch on the calling thread. The "2 threads"
+figure runs two halves of the batch in two Python threads; measured here it is no faster than
+one thread (embreex holds the GIL), so the 2-thread ratio compares ours against the best
+embreex figure.
 Ours is timed by `examples/raycast_throughput.rs` with RAYON_NUM_THREADS=1 and 2.
+On a shared machine wall-clock figures swing with other load; the second table divides by
+CPU seconds instead (embreex: process_time; ours: summed per-thread schedstat), 1 thread.
 
 Usage: /work/venv/bin/python bench/raycast_vs_embree.py [--repeats 5]
 Needs: pip install trimesh embreex (into /work/venv).
