@@ -11,6 +11,7 @@ pub mod io;
 pub mod math;
 pub mod mesh;
 pub mod phantom;
+pub mod raycast;
 pub mod volume;
 
 pub use error::{Error, Result};

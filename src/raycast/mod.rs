@@ -1,0 +1,16 @@
+//! Ray casting the lumen mesh: a four-wide SAH BVH with SIMD box and triangle tests,
+//! watertight two-sided ray–triangle intersection, closest-hit and any-hit queries, and the
+//! per-frame geometry buffer (depth, surface point, normal, gamma, triangle, barycentrics).
+//!
+//! ```text
+//! TriMesh ─ Scene::new ─► Scene ─ closest_hit / any_hit / cast_frame(camera, pose) ─► GBuffer
+//! ```
+
+mod bvh;
+mod bvh_build;
+mod gbuffer;
+mod scene;
+pub mod triangle;
+
+pub use gbuffer::{cast_frame, cast_frame_with, GBuffer, RayTable};
+pub use scene::{Hit, Scene};
