@@ -1,0 +1,1 @@
+//! Plots (paper, Fig. 2).
