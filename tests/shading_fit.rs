@@ -188,3 +188,100 @@ fn psi_explains_a_physically_based_frame() {
         }
     }
 }
+
+/// Dark vessels and (unsaturated) specular highlights are texture, not shading: robust IRLS
+/// keeps them from pulling Psi, plain least squares does not.
+#[test]
+fn robust_fit_ignores_vessels_and_highlights() {
+    let mut rng = Rng::new(23);
+    let dom = skewed_domain(&mut rng, 80_000);
+    let (mut vessels, mut highlights) = (0, 0);
+    let s = sample_set(&dom, |_, g, r| {
+        let u = rng.uniform();
+        let noise = rng.normal();
+        std::array::from_fn(|ch| {
+            let v = psi(&TRUTH[ch], g, r);
+            let v = v + (0.0004 * v + 4e-6).sqrt() * noise;
+            if u < 0.10 {
+                v * 0.45 // a vessel: darker
+            } else if u < 0.14 {
+                (v + 0.25).min(0.99) // a highlight below the saturation level
+            } else {
+                v
+            }
+        })
+    });
+    for i in 0..s.len() {
+        let v = psi(&TRUTH[0], f64::from(s.gamma[i]), s.r(i));
+        if f64::from(s.rgb[0][i]) < 0.7 * v {
+            vessels += 1;
+        } else if f64::from(s.rgb[0][i]) > v + 0.1 {
+            highlights += 1;
+        }
+    }
+    let truth = |ch: usize, g: f64, r: f64| psi(&TRUTH[ch], g, r);
+    let mut errs = Vec::new();
+    for robust in [Robust::None, Robust::Huber(1.345), Robust::Tukey(4.685)] {
+        let opts = FitOptions { robust, ..Default::default() };
+        let m = fit(&s, true, &opts);
+        errs.push(rel_rms(&m, truth, |_, _| true));
+    }
+    println!(
+        "{vessels} vessel and {highlights} highlight samples of {}: error vs truth: least squares {:.2}%, Huber {:.2}%, Tukey {:.2}%",
+        s.len(), 100.0 * errs[0], 100.0 * errs[1], 100.0 * errs[2]
+    );
+    assert!(errs[2] < 0.01, "Tukey fit off by {:.3}%", 100.0 * errs[2]);
+    assert!(errs[1] < 0.5 * errs[0], "Huber should halve the error: {errs:?}");
+    assert!(errs[0] > 5.0 * errs[2], "least squares should be pulled: {errs:?}");
+}
+
+/// A head-on view has no grazing samples: the unconstrained rho extrapolates below zero at
+/// small gamma. The fit must notice and fall back to non-negative Bernstein coefficients.
+#[test]
+fn non_positive_fit_falls_back_to_constrained() {
+    let mut rng = Rng::new(3);
+    let dom: Vec<(f64, f64)> = (0..20_000).map(|_| (0.35 + 0.65 * rng.uniform(), rng.uniform())).collect();
+    // rho ~ 1.2 (gamma - 0.3): linear with its root inside [0, 1].
+    let s = sample_set(&dom, |_, g, r| {
+        let v = 1.2 * (g - 0.3) * (1.0 - 0.5 * r);
+        [v + 0.004 * rng.normal(), 0.5 * v, 0.3 * v]
+    });
+    let w = density_weights(&s, &WeightOptions::default()).weights;
+    let fit = fit_psi(&s, &w, &FitOptions::default()).unwrap();
+    for (ch, c) in fit.channels.iter().enumerate() {
+        println!(
+            "channel {ch}: unconstrained min Psi {:.4}, constrained {}, final min Psi {:.2e}, rms {:.4}",
+            c.unconstrained_min_psi, c.constrained, c.min_psi, fit.model.rms_residual[ch]
+        );
+        assert!(c.unconstrained_min_psi < -0.1, "the crafted case should go negative");
+        assert!(c.constrained);
+        assert!(c.min_psi > 0.0);
+        assert!(fit.model.c[ch].iter().all(|&x| x > 0.0) && fit.model.d[ch].iter().all(|&x| x > 0.0));
+        // Positive everywhere on a fine grid too, and still a close fit where the data are.
+        for a in 0..=200 {
+            for b in 0..=20 {
+                let z = fit.model.z_min + (fit.model.z_max - fit.model.z_min) * b as f64 / 20.0;
+                assert!(fit.model.eval(ch, a as f64 / 200.0, z) > 0.0);
+            }
+        }
+    }
+    assert!(fit.model.rms_residual[0] < 0.03, "rms {}", fit.model.rms_residual[0]);
+}
+
+/// shading.json: the model survives a JSON round trip bit for bit, under DESIGN.md's names.
+#[test]
+fn psi_model_json_round_trip() {
+    let mut rng = Rng::new(9);
+    let dom = skewed_domain(&mut rng, 5000);
+    let s = sample_set(&dom, |_, g, r| std::array::from_fn(|ch| psi(&TRUTH[ch], g, r)));
+    let mut m = fit(&s, true, &FitOptions::default());
+    m.camera_to_world = [0.1, -0.9, 0.3, 12.5, 0.7, 0.2, -0.6, -3.25, 0.5, 0.1, 0.8, 40.0, 0.0, 0.0, 0.0, 1.0];
+    m.excluded.saturated = 17;
+    let text = serde_json::to_string_pretty(&m).unwrap();
+    for key in ["camera_to_world", "z_min", "z_max", "\"c\"", "\"d\"", "rms_residual", "samples_used", "saturated"] {
+        assert!(text.contains(key), "{key} missing from {text}");
+    }
+    let back: PsiModel = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, m);
+    assert_eq!(back.eval_rgb(0.4, 20.0), m.eval_rgb(0.4, 20.0));
+}
