@@ -51,6 +51,10 @@ pub struct FitOptions {
     pub max_irls_iterations: usize,
     /// Grid points per axis over gamma, r in [0, 1] for the positivity check. Default 65.
     pub positivity_grid: usize,
+    /// Refit with non-negative Bernstein coefficients when the fit goes non-positive on the
+    /// grid (the texture divides by Psi). Default true; false gives the plain least-squares
+    /// optimum (still checked and reported in [`ChannelFit::unconstrained_min_psi`]).
+    pub enforce_positivity: bool,
 }
 
 impl Default for FitOptions {
@@ -63,6 +67,7 @@ impl Default for FitOptions {
             robust: Robust::None,
             max_irls_iterations: 20,
             positivity_grid: 65,
+            enforce_positivity: true,
         }
     }
 }
@@ -82,7 +87,7 @@ pub struct ChannelFit {
     pub constrained: bool,
     /// `C_p = sum w_i (Psi - P_i)^2` with the density weights given to [`fit_psi`].
     pub cost: f64,
-    /// Smallest Psi on the positivity grid of the final fit (> 0).
+    /// Smallest Psi on the positivity grid of the final fit (> 0 unless positivity is not enforced).
     pub min_psi: f64,
 }
 
@@ -148,7 +153,7 @@ pub fn fit_psi(samples: &SampleSet, weights: &[f32], opts: &FitOptions) -> Resul
         let mut p = fit_channel(&quads[ch], values, &gamma_r, &w, opts, false, &mut rep);
         rep.unconstrained_min_psi = min_on_grid(&p, opts.positivity_grid);
         rep.min_psi = rep.unconstrained_min_psi;
-        if !(rep.min_psi > 0.0) {
+        if opts.enforce_positivity && !(rep.min_psi > 0.0) {
             // Psi must be positive (the texture divides by it): constrained refit.
             rep.constrained = true;
             p = fit_channel(&quads[ch], values, &gamma_r, &w, opts, true, &mut rep);
