@@ -18,6 +18,7 @@ use super::psi::PsiModel;
 use super::samples::SampleSet;
 use crate::{Error, Result};
 use nalgebra::SVector;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Robust loss applied on top of the density weights (IRLS).
@@ -47,7 +48,8 @@ pub struct FitOptions {
     pub max_lm_iterations: usize,
     /// Robust loss on top of the density weights. Default `Robust::None` (the paper).
     pub robust: Robust,
-    /// Most IRLS re-weightings when `robust` is not `None`. Default 20.
+    /// Most IRLS re-weightings when `robust` is not `None`; they stop earlier once no
+    /// parameter moves by more than 1e-5 of itself. Default 10.
     pub max_irls_iterations: usize,
     /// Grid points per axis over gamma, r in [0, 1] for the positivity check. Default 65.
     pub positivity_grid: usize,
@@ -65,7 +67,7 @@ impl Default for FitOptions {
             lm_polish: true,
             max_lm_iterations: 100,
             robust: Robust::None,
-            max_irls_iterations: 20,
+            max_irls_iterations: 10,
             positivity_grid: 65,
             enforce_positivity: true,
         }
@@ -164,17 +166,24 @@ pub fn fit_psi(samples: &SampleSet, weights: &[f32], opts: &FitOptions) -> Resul
     }
 
     // Cost and RMS straight from the samples (the moment form loses digits near a perfect fit).
-    let mut sums = [0.0f64; 3];
-    let mut wsum = 0.0;
-    for i in 0..n {
-        let (g, ri) = gamma_r(i);
-        let wi = w(i);
-        wsum += wi;
-        for ch in 0..3 {
-            let e = psi_at(&params[ch], g, ri) - f64::from(samples.rgb[ch][i]);
-            sums[ch] += wi * e * e;
-        }
-    }
+    let (sums, wsum) = (0..n)
+        .into_par_iter()
+        .fold(
+            || ([0.0f64; 3], 0.0f64),
+            |(mut acc, ws), i| {
+                let (g, ri) = gamma_r(i);
+                let wi = w(i);
+                for ch in 0..3 {
+                    let e = psi_at(&params[ch], g, ri) - f64::from(samples.rgb[ch][i]);
+                    acc[ch] += wi * e * e;
+                }
+                (acc, ws + wi)
+            },
+        )
+        .reduce(
+            || ([0.0; 3], 0.0),
+            |(a, wa), (b, wb)| ([a[0] + b[0], a[1] + b[1], a[2] + b[2]], wa + wb),
+        );
     for ch in 0..3 {
         reports[ch].cost = sums[ch];
     }
@@ -274,7 +283,7 @@ fn fit_channel(
             .map(|k| (next[k] - p[k]).abs() / (p[k].abs() + 1e-3 * scale))
             .fold(0.0, f64::max);
         p = next;
-        if change < 1e-7 {
+        if change < 1e-5 {
             break;
         }
     }

@@ -88,9 +88,9 @@ pub(crate) fn accumulate<const C: usize>(
                 let (gm, r) = gamma_r(i);
                 let g = tensor_basis(gm, r);
                 let wg: [f64; 16] = std::array::from_fn(|k| wi * g[k]);
-                // Full outer product: branch-free, vectorises; symmetry used nowhere.
-                for (row, &wgj) in a.g.iter_mut().zip(wg.iter()) {
-                    for (x, &gk) in row.iter_mut().zip(g.iter()) {
+                // Upper triangle only (G is symmetric; mirrored after the pass).
+                for (j, (row, &wgj)) in a.g.iter_mut().zip(wg.iter()).enumerate() {
+                    for (x, &gk) in row[j..].iter_mut().zip(g[j..].iter()) {
                         *x += wgj * gk;
                     }
                 }
@@ -106,7 +106,7 @@ pub(crate) fn accumulate<const C: usize>(
             a
         })
         .reduce(Acc::zero, Acc::add);
-    let g = Mat16::from_fn(|r, c| acc.g[r][c]);
+    let g = Mat16::from_fn(|r, c| if r <= c { acc.g[r][c] } else { acc.g[c][r] });
     std::array::from_fn(|c| Quadratic {
         g,
         h: Vec16::from_column_slice(&acc.h[c]),
