@@ -12,6 +12,11 @@
 //! on per-sample residuals, so the `levenberg-marquardt` crate (which wants an N x 7 residual
 //! Jacobian, N ~ 80k) would only make it slower.
 
+// Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
+#![allow(clippy::needless_range_loop)]
+// `!(x > t)` on floats is deliberate: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use super::bernstein::eval3;
 use super::moments::{accumulate, solve_box, solve_spd, Quadratic};
 use super::psi::PsiModel;

@@ -7,6 +7,9 @@
 //! so one pass over the samples gives everything the alternation and the Gauss–Newton
 //! polish need; their iterations then cost microseconds regardless of the sample count.
 
+// Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
+#![allow(clippy::needless_range_loop)]
+
 use super::bernstein::basis3;
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;

@@ -4,6 +4,9 @@
 //! The file type follows the path: `.svg` writes SVG, anything else PNG (rendered into an RGB
 //! buffer and encoded with `png`; plotters' own encoder would pull a second image crate).
 
+// Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
+#![allow(clippy::needless_range_loop)]
+
 use super::psi::PsiModel;
 use super::samples::SampleSet;
 use crate::{Error, Result};

@@ -1,5 +1,10 @@
 //! The samples Psi is fitted to: (gamma, z, R, G, B) of the pixels that obey the model.
 
+// Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
+#![allow(clippy::needless_range_loop)]
+// `!(x > t)` on floats is deliberate: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use serde::{Deserialize, Serialize};
 
 /// Which pixels become samples, and how the depth range is set.

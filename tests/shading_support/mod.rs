@@ -1,5 +1,8 @@
 //! Test data for the shading tests: a seeded RNG, skewed (gamma, z) samples from a known Psi,
 //! and a physically based frame of a camera inside an analytic airway (NOT rendered with Psi).
+
+// Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
+#![allow(clippy::needless_range_loop)]
 #![allow(dead_code)]
 
 pub mod physical_frame;
@@ -65,7 +68,10 @@ pub fn skewed_domain(rng: &mut Rng, n: usize) -> Vec<(f64, f64)> {
 }
 
 /// A SampleSet with z_min = 6, z_max = 40 mm from (gamma, r) pairs and per-channel intensities.
-pub fn sample_set(domain: &[(f64, f64)], mut rgb: impl FnMut(usize, f64, f64) -> [f64; 3]) -> SampleSet {
+pub fn sample_set(
+    domain: &[(f64, f64)],
+    mut rgb: impl FnMut(usize, f64, f64) -> [f64; 3],
+) -> SampleSet {
     let mut s = SampleSet {
         z_min: 6.0,
         z_max: 40.0,

@@ -103,15 +103,29 @@ fn srgb_decode(x: f64) -> f64 {
 /// Render a `size` x `size` frame from a camera at `eye` (world mm), looking along `forward`
 /// (tilted off the tube axis), 100-degree field of view; `seed` drives the noise.
 /// `cone_exponent`: the light's angular profile is cos^k of the angle off the optical axis.
-pub fn render(size: usize, eye: [f64; 3], tilt_deg: [f64; 2], cone_exponent: i32, seed: u64) -> Frame {
+pub fn render(
+    size: usize,
+    eye: [f64; 3],
+    tilt_deg: [f64; 2],
+    cone_exponent: i32,
+    seed: u64,
+) -> Frame {
     let n = size * size;
     let f_px = (size as f64 / 2.0) / (50f64.to_radians()).tan();
     let c = (size as f64 - 1.0) / 2.0;
     // Camera axes: OpenCV (+x right, +y down, +z forward), rotated by the tilt about x then y.
     let (ax, ay) = (tilt_deg[0].to_radians(), tilt_deg[1].to_radians());
     let rot = |v: [f64; 3]| -> [f64; 3] {
-        let v1 = [v[0], v[1] * ax.cos() - v[2] * ax.sin(), v[1] * ax.sin() + v[2] * ax.cos()];
-        [v1[0] * ay.cos() + v1[2] * ay.sin(), v1[1], -v1[0] * ay.sin() + v1[2] * ay.cos()]
+        let v1 = [
+            v[0],
+            v[1] * ax.cos() - v[2] * ax.sin(),
+            v[1] * ax.sin() + v[2] * ax.cos(),
+        ];
+        [
+            v1[0] * ay.cos() + v1[2] * ay.sin(),
+            v1[1],
+            -v1[0] * ay.sin() + v1[2] * ay.cos(),
+        ]
     };
     let optical_axis = rot([0.0, 0.0, 1.0]);
     let mut gamma = vec![0f32; n];
