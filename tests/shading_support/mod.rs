@@ -1,0 +1,89 @@
+//! Test data for the shading tests: a seeded RNG, skewed (gamma, z) samples from a known Psi,
+//! and a physically based frame of a camera inside an analytic airway (NOT rendered with Psi).
+
+// Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
+#![allow(clippy::needless_range_loop)]
+#![allow(dead_code)]
+
+pub mod physical_frame;
+
+use bronchosim::shading::SampleSet;
+
+/// SplitMix64: small, seeded, reproducible.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Rng(seed)
+    }
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Standard normal (Box–Muller).
+    pub fn normal(&mut self) -> f64 {
+        let u1 = self.uniform().max(1e-300);
+        let u2 = self.uniform();
+        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    }
+}
+
+/// Psi for parameters (c_0..c_3, d_1..d_3) at (gamma, r).
+pub fn psi(p: &[f64; 7], gamma: f64, r: f64) -> f64 {
+    let b = |t: f64| {
+        let s = 1.0 - t;
+        [s * s * s, 3.0 * s * s * t, 3.0 * s * t * t, t * t * t]
+    };
+    let bg = b(gamma);
+    let br = b(r);
+    (p[0] * bg[0] + p[1] * bg[1] + p[2] * bg[2] + p[3] * bg[3])
+        * (br[0] + p[4] * br[1] + p[5] * br[2] + p[6] * br[3])
+}
+
+/// Where a frame's samples lie: like a camera looking down a tube, most pixels see the far
+/// wall at grazing angles (gamma ≈ R / z), a few see the near wall head-on; a thin uniform
+/// background covers the rest of the domain sparsely. Returns (gamma, r) pairs.
+pub fn skewed_domain(rng: &mut Rng, n: usize) -> Vec<(f64, f64)> {
+    (0..n)
+        .map(|_| {
+            if rng.uniform() < 0.04 {
+                // Sparse background over the whole domain.
+                (0.05 + 0.95 * rng.uniform(), rng.uniform())
+            } else {
+                // Dense cluster: far and grazing dominates (depth skewed towards r = 1).
+                let r = 1.0 - rng.uniform().powi(2);
+                let z = 6.0 + 34.0 * r; // mm
+                let g = (7.0 / z + 0.07 * rng.normal()).clamp(0.05, 1.0);
+                (g, r)
+            }
+        })
+        .collect()
+}
+
+/// A SampleSet with z_min = 6, z_max = 40 mm from (gamma, r) pairs and per-channel intensities.
+pub fn sample_set(
+    domain: &[(f64, f64)],
+    mut rgb: impl FnMut(usize, f64, f64) -> [f64; 3],
+) -> SampleSet {
+    let mut s = SampleSet {
+        z_min: 6.0,
+        z_max: 40.0,
+        ..Default::default()
+    };
+    for (i, &(g, r)) in domain.iter().enumerate() {
+        s.gamma.push(g as f32);
+        s.z.push((6.0 + 34.0 * r) as f32);
+        let v = rgb(i, g, r);
+        for ch in 0..3 {
+            s.rgb[ch].push(v[ch] as f32);
+        }
+    }
+    s
+}
