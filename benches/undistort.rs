@@ -32,7 +32,9 @@ fn bench(c: &mut Criterion) {
     let (w, h) = (cam.width as usize, cam.height as usize);
     let img: Vec<f32> = (0..w * h * 3).map(|i| (i % 251) as f32 / 250.0).collect();
     c.bench_function("remap_rgb_f32_1280x1024", |b| {
-        b.iter(|| remap_bilinear(black_box(&img), cam.width, cam.height, 3, &map, 0.0).expect("remap"))
+        b.iter(|| {
+            remap_bilinear(black_box(&img), cam.width, cam.height, 3, &map, 0.0).expect("remap")
+        })
     });
 }
 

@@ -24,7 +24,11 @@ fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let reps: usize = std::env::args().nth(1).map(|s| s.parse()).transpose()?.unwrap_or(20);
+    let reps: usize = std::env::args()
+        .nth(1)
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(20);
     // Same camera as bench/undistort_vs_opencv.py and tests/data ("wide_1280x1024").
     let cam = Camera {
         width: 1280,
@@ -40,7 +44,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         k3: 0.0,
     };
     let mode = std::env::args().nth(2).unwrap_or_else(|| "both".into());
-    let reps_for = |op: &str| if mode == "both" || mode == op { reps } else { 0 };
+    let reps_for = |op: &str| {
+        if mode == "both" || mode == op {
+            reps
+        } else {
+            0
+        }
+    };
     let map_ms = median_ms(reps_for("map"), || {
         black_box(UndistortMap::for_camera(black_box(&cam)).expect("map"));
     });
@@ -48,7 +58,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (w, h) = (cam.width as usize, cam.height as usize);
     let img: Vec<f32> = (0..w * h * 3).map(|i| (i % 251) as f32 / 250.0).collect();
     let remap_ms = median_ms(reps_for("remap"), || {
-        black_box(remap_bilinear(black_box(&img), cam.width, cam.height, 3, &map, 0.0).expect("remap"));
+        black_box(
+            remap_bilinear(black_box(&img), cam.width, cam.height, 3, &map, 0.0).expect("remap"),
+        );
     });
     println!(
         "{{\"map_ms\": {map_ms:.4}, \"remap_ms\": {remap_ms:.4}, \"threads\": {}}}",
