@@ -272,6 +272,26 @@ fn remap_is_exact_on_a_linear_image_and_fills_outside() {
         "{valid} {outside}"
     );
     assert!(remap_bilinear(&src[1..], cam.width, cam.height, 3, &map, 0.0).is_err());
+
+    // Other channel counts (1 and 5 take different code paths) give the same per channel.
+    for channels in [1usize, 5] {
+        let img: Vec<f32> = (0..w * h * channels)
+            .map(|i| {
+                let (p, k) = (i / channels, i % channels);
+                ((p % w) as f32) + k as f32 * ((p / w) as f32)
+            })
+            .collect();
+        let got = remap_bilinear(&img, cam.width, cam.height, channels, &map, -7.0).expect("remap");
+        for i in (0..w * h).filter(|&i| mask[i]) {
+            for k in 0..channels {
+                let want = map.map_x[i] + k as f32 * map.map_y[i];
+                assert!(
+                    (got[i * channels + k] - want).abs() < 4e-3,
+                    "{channels} channels, pixel {i}"
+                );
+            }
+        }
+    }
 }
 
 #[test]

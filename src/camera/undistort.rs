@@ -6,6 +6,7 @@ use super::Camera;
 use crate::math::Matrix3;
 use crate::{Error, Result};
 use rayon::prelude::*;
+use std::mem::MaybeUninit;
 
 /// For each pixel of an ideal pinhole image, the position (pixels) in the distorted camera
 /// image that it sees. Row-major, `width * height` entries each.
@@ -41,24 +42,27 @@ impl UndistortMap {
                 ))
             })?;
         let (w, h) = (width as usize, height as usize);
-        let mut map_x = vec![0f32; w * h];
-        let mut map_y = vec![0f32; w * h];
-        if w == 0 || h == 0 {
+        let n = w * h;
+        if n == 0 {
             return Ok(Self {
                 width,
                 height,
-                map_x,
-                map_y,
+                map_x: Vec::new(),
+                map_y: Vec::new(),
             });
         }
+        // Not zero-filled first: every element is written exactly once below.
+        let mut map_x: Vec<f32> = Vec::with_capacity(n);
+        let mut map_y: Vec<f32> = Vec::with_capacity(n);
         let c = *camera;
         // The normalised ray of pixel (u, v) is ir * (u, v, 1): linear in u along a row, so each
         // row starts from (x0, y0, w0) and steps by the first column of ir.
         let (dx, dy, dw) = (ir[(0, 0)], ir[(1, 0)], ir[(2, 0)]);
         let affine = dw == 0.0 && ir[(2, 1)] == 0.0;
-        map_x
+        let cols: Vec<f64> = (0..w).map(|u| u as f64).collect();
+        map_x.spare_capacity_mut()[..n]
             .par_chunks_mut(w)
-            .zip(map_y.par_chunks_mut(w))
+            .zip(map_y.spare_capacity_mut()[..n].par_chunks_mut(w))
             .enumerate()
             .for_each(|(v, (row_x, row_y))| {
                 let vf = v as f64;
@@ -66,26 +70,30 @@ impl UndistortMap {
                 let y0 = ir[(1, 1)] * vf + ir[(1, 2)];
                 let w0 = ir[(2, 1)] * vf + ir[(2, 2)];
                 if affine {
-                    let inv_w = 1.0 / w0;
-                    distort_row(
-                        &c,
-                        row_x,
-                        row_y,
-                        x0 * inv_w,
-                        dx * inv_w,
-                        y0 * inv_w,
-                        dy * inv_w,
-                    );
+                    let iw = 1.0 / w0;
+                    let row = Row {
+                        x0: x0 * iw,
+                        dx: dx * iw,
+                        y0: y0 * iw,
+                        dy: dy * iw,
+                    };
+                    distort_row(&c, &row, &cols, row_x, row_y);
                 } else {
                     for (u, (mx, my)) in row_x.iter_mut().zip(row_y.iter_mut()).enumerate() {
                         let uf = u as f64;
                         let iw = 1.0 / (w0 + dw * uf);
                         let (x, y) = ((x0 + dx * uf) * iw, (y0 + dy * uf) * iw);
                         let (px, py) = distort_pixel(&c, x, y);
-                        (*mx, *my) = (px as f32, py as f32);
+                        mx.write(px as f32);
+                        my.write(py as f32);
                     }
                 }
             });
+        // SAFETY: the rows cover [..n] of both maps and each row writes all its elements.
+        unsafe {
+            map_x.set_len(n);
+            map_y.set_len(n);
+        }
         Ok(Self {
             width,
             height,
@@ -106,23 +114,59 @@ impl UndistortMap {
     }
 }
 
-/// One map row with an affine pixel → ray relation: x = x0 + dx u, y = y0 + dy u.
-/// Written as a plain loop over slices so the compiler can vectorise it.
-#[inline]
-fn distort_row(
-    c: &Camera,
-    row_x: &mut [f32],
-    row_y: &mut [f32],
+/// A map row with an affine pixel → ray relation: x = x0 + dx u, y = y0 + dy u.
+struct Row {
     x0: f64,
     dx: f64,
     y0: f64,
     dy: f64,
+}
+
+/// Fill one map row; uses AVX2 (4 doubles per instruction) when the CPU has it, the same
+/// code compiled for the baseline x86-64 (SSE2) otherwise. Results are bit-identical: no FMA
+/// contraction happens without an explicit mul_add.
+fn distort_row(
+    c: &Camera,
+    row: &Row,
+    cols: &[f64],
+    row_x: &mut [MaybeUninit<f32>],
+    row_y: &mut [MaybeUninit<f32>],
 ) {
-    for (u, (mx, my)) in row_x.iter_mut().zip(row_y.iter_mut()).enumerate() {
-        let uf = u as f64;
-        let (px, py) = distort_pixel(c, x0 + dx * uf, y0 + dy * uf);
-        *mx = px as f32;
-        *my = py as f32;
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2, checked just above.
+        unsafe { distort_row_avx2(c, row, cols, row_x, row_y) };
+        return;
+    }
+    distort_row_body(c, row, cols, row_x, row_y);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn distort_row_avx2(
+    c: &Camera,
+    row: &Row,
+    cols: &[f64],
+    row_x: &mut [MaybeUninit<f32>],
+    row_y: &mut [MaybeUninit<f32>],
+) {
+    distort_row_body(c, row, cols, row_x, row_y);
+}
+
+/// The row loop over flat slices, written so the compiler vectorises it (no integer → float
+/// conversion inside: the column coordinates come precomputed in `cols`).
+#[inline(always)]
+fn distort_row_body(
+    c: &Camera,
+    row: &Row,
+    cols: &[f64],
+    row_x: &mut [MaybeUninit<f32>],
+    row_y: &mut [MaybeUninit<f32>],
+) {
+    for ((mx, my), &u) in row_x.iter_mut().zip(row_y.iter_mut()).zip(cols) {
+        let (px, py) = distort_pixel(c, row.x0 + row.dx * u, row.y0 + row.dy * u);
+        mx.write(px as f32);
+        my.write(py as f32);
     }
 }
 
@@ -166,10 +210,10 @@ pub fn remap_bilinear(
         fill,
     };
     let out = match channels {
-        1 => remap_impl::<1>(&src, map),
-        3 => remap_impl::<3>(&src, map),
-        4 => remap_impl::<4>(&src, map),
-        n => remap_dyn(&src, map, n),
+        1 => remap_tiled::<1>(&src, map, 1),
+        3 => remap_tiled::<3>(&src, map, 3),
+        4 => remap_tiled::<4>(&src, map, 4),
+        n => remap_tiled::<0>(&src, map, n),
     };
     Ok(out)
 }
@@ -181,40 +225,73 @@ struct Source<'a> {
     fill: f32,
 }
 
+/// Bilinear footprint of one output pixel: top-left tap (x0, y0) and fractions (ax, ay);
+/// x0 = i32::MIN marks a position with no tap inside the image (or NaN).
+#[derive(Clone, Copy, Default)]
+struct Taps {
+    x0: i32,
+    y0: i32,
+    ax: f32,
+    ay: f32,
+}
+
 impl Source<'_> {
-    /// Bilinear sample at (x, y) into `out` (`out.len()` channels); the fast path when all four
-    /// taps are inside, else per-tap with `fill` outside.
+    /// Branch-free so that a row of taps vectorises.
     #[inline(always)]
-    fn sample(&self, x: f32, y: f32, out: &mut [f32]) {
+    fn taps(&self, x: f32, y: f32) -> Taps {
+        // False for NaN; keeps huge values away from the integer casts' saturation.
+        let near = x > -1.0 && y > -1.0 && x < self.w as f32 && y < self.h as f32;
+        // floor() by truncation: f32::floor is a libm call on baseline x86-64 (no SSE4.1).
+        let (xt, yt) = (x as i32, y as i32);
+        let (x0, y0) = (xt - (x < xt as f32) as i32, yt - (y < yt as f32) as i32);
+        let (ax, ay) = (x - x0 as f32, y - y0 as f32);
+        Taps {
+            x0: if near { x0 } else { i32::MIN },
+            y0,
+            ax,
+            ay,
+        }
+    }
+
+    /// True when all four taps lie inside the image.
+    #[inline(always)]
+    fn interior(&self, t: Taps) -> bool {
+        t.x0 >= 0 && t.y0 >= 0 && t.x0 as usize + 1 < self.w && t.y0 as usize + 1 < self.h
+    }
+
+    /// Bilinear sample with all four taps inside (`out.len()` channels), as two horizontal
+    /// lerps and one vertical.
+    #[inline(always)]
+    fn sample_interior(&self, t: Taps, out: &mut [f32]) {
         let c = out.len();
-        let (xf, yf) = (x.floor(), y.floor());
-        let (ax, ay) = (x - xf, y - yf);
-        // Range check in float first: casting NaN or huge values to isize would be meaningless.
-        if !(xf >= -1.0 && yf >= -1.0 && xf < self.w as f32 && yf < self.h as f32) {
+        let i = (t.y0 as usize * self.w + t.x0 as usize) * c;
+        let j = i + self.w * c;
+        let (r0, r1) = (&self.data[i..i + 2 * c], &self.data[j..j + 2 * c]);
+        for (k, o) in out.iter_mut().enumerate() {
+            let top = r0[k] + t.ax * (r0[c + k] - r0[k]);
+            let bot = r1[k] + t.ax * (r1[c + k] - r1[k]);
+            *o = top + t.ay * (bot - top);
+        }
+    }
+
+    /// Bilinear sample near or beyond the border: taps outside contribute `fill`.
+    #[cold]
+    fn sample_border(&self, t: Taps, out: &mut [f32]) {
+        if t.x0 == i32::MIN {
             out.fill(self.fill);
             return;
         }
-        let (x0, y0) = (xf as isize, yf as isize);
-        let (w, h) = (self.w as isize, self.h as isize);
-        let (w00, w01, w10, w11) = (
-            (1.0 - ax) * (1.0 - ay),
-            ax * (1.0 - ay),
-            (1.0 - ax) * ay,
-            ax * ay,
-        );
-        if x0 >= 0 && y0 >= 0 && x0 + 1 < w && y0 + 1 < h {
-            let i = (y0 as usize * self.w + x0 as usize) * c;
-            let j = i + self.w * c;
-            let (r0, r1) = (&self.data[i..i + 2 * c], &self.data[j..j + 2 * c]);
-            for k in 0..c {
-                out[k] = w00 * r0[k] + w01 * r0[c + k] + w10 * r1[k] + w11 * r1[c + k];
-            }
-            return;
-        }
+        let c = out.len();
+        let (ax, ay) = (t.ax, t.ay);
         out.fill(0.0);
-        for (dy, dx, wt) in [(0, 0, w00), (0, 1, w01), (1, 0, w10), (1, 1, w11)] {
-            let (xi, yi) = (x0 + dx, y0 + dy);
-            if xi >= 0 && yi >= 0 && xi < w && yi < h {
+        for (dy, dx, wt) in [
+            (0, 0, (1.0 - ax) * (1.0 - ay)),
+            (0, 1, ax * (1.0 - ay)),
+            (1, 0, (1.0 - ax) * ay),
+            (1, 1, ax * ay),
+        ] {
+            let (xi, yi) = (t.x0 as i64 + dx, t.y0 as i64 + dy);
+            if xi >= 0 && yi >= 0 && (xi as usize) < self.w && (yi as usize) < self.h {
                 let i = (yi as usize * self.w + xi as usize) * c;
                 for (o, &s) in out.iter_mut().zip(&self.data[i..i + c]) {
                     *o += wt * s;
@@ -228,34 +305,94 @@ impl Source<'_> {
     }
 }
 
-fn remap_impl<const C: usize>(src: &Source, map: &UndistortMap) -> Vec<f32> {
+/// Output tile: 32 rows x 64 columns, whose source region (~100 KB of RGB f32) stays in L2.
+/// Row by row, a strongly distorted map walks across many source rows (one cache line per
+/// pixel); tiles keep reads local, as OpenCV's remap does.
+const TILE_ROWS: usize = 32;
+const TILE_COLS: usize = 64;
+
+/// Tiled remap, parallel over bands of [`TILE_ROWS`] output rows. `C` is the channel count
+/// (a constant, so the channel loops unroll), or 0 to use `c_dyn`.
+fn remap_tiled<const C: usize>(src: &Source, map: &UndistortMap, c_dyn: usize) -> Vec<f32> {
+    let c = if C == 0 { c_dyn } else { C };
     let w = map.width as usize;
-    let mut out = vec![0f32; map.map_x.len() * C];
+    let n = map.map_x.len() * c;
     if w == 0 {
-        return out;
+        return vec![0.0; n];
     }
-    out.par_chunks_mut(w * C)
-        .zip(map.map_x.par_chunks(w).zip(map.map_y.par_chunks(w)))
-        .for_each(|(row, (mx, my))| {
-            for ((px, &x), &y) in row.chunks_exact_mut(C).zip(mx).zip(my) {
-                src.sample(x, y, px);
+    // Not zero-filled first: every element is written exactly once below (saves a 16 MB
+    // memset per 1280x1024 RGB frame).
+    let mut out: Vec<f32> = Vec::with_capacity(n);
+    out.spare_capacity_mut()[..n]
+        .par_chunks_mut(w * c * TILE_ROWS)
+        .enumerate()
+        .for_each(|(band_index, band)| {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2, checked just above.
+                unsafe { remap_band_avx2::<C>(src, map, band_index, band, c_dyn) };
+                return;
             }
+            remap_band::<C>(src, map, band_index, band, c_dyn);
         });
+    // SAFETY: the bands cover out[..n] and remap_band writes every element of its band.
+    unsafe { out.set_len(n) };
     out
 }
 
-fn remap_dyn(src: &Source, map: &UndistortMap, c: usize) -> Vec<f32> {
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn remap_band_avx2<const C: usize>(
+    src: &Source,
+    map: &UndistortMap,
+    band_index: usize,
+    band: &mut [MaybeUninit<f32>],
+    c_dyn: usize,
+) {
+    remap_band::<C>(src, map, band_index, band, c_dyn);
+}
+
+/// One band of output rows, tile by tile; each tile row in two passes: the taps of all its
+/// pixels (vectorised), then the gathers. Writes every element of `band`.
+#[inline(always)]
+fn remap_band<const C: usize>(
+    src: &Source,
+    map: &UndistortMap,
+    band_index: usize,
+    band: &mut [MaybeUninit<f32>],
+    c_dyn: usize,
+) {
+    let c = if C == 0 { c_dyn } else { C };
     let w = map.width as usize;
-    let mut out = vec![0f32; map.map_x.len() * c];
-    if w == 0 {
-        return out;
-    }
-    out.par_chunks_mut(w * c)
-        .zip(map.map_x.par_chunks(w).zip(map.map_y.par_chunks(w)))
-        .for_each(|(row, (mx, my))| {
-            for ((px, &x), &y) in row.chunks_exact_mut(c).zip(mx).zip(my) {
-                src.sample(x, y, px);
+    let row0 = band_index * TILE_ROWS;
+    let rows = band.len() / (w * c);
+    let mut taps = [Taps::default(); TILE_COLS];
+    let mut px = [0f32; 16];
+    let mut px_dyn = vec![0f32; if C == 0 || C > 16 { c } else { 0 }];
+    for u0 in (0..w).step_by(TILE_COLS) {
+        let u1 = (u0 + TILE_COLS).min(w);
+        for r in 0..rows {
+            let m = (row0 + r) * w;
+            let (mx, my) = (&map.map_x[m + u0..m + u1], &map.map_y[m + u0..m + u1]);
+            for (t, (&x, &y)) in taps.iter_mut().zip(mx.iter().zip(my)) {
+                *t = src.taps(x, y);
             }
-        });
-    out
+            let out_row = &mut band[(r * w + u0) * c..(r * w + u1) * c];
+            for (dst, &t) in out_row.chunks_exact_mut(c).zip(&taps) {
+                let val = if C == 0 || C > 16 {
+                    &mut px_dyn[..]
+                } else {
+                    &mut px[..C]
+                };
+                if src.interior(t) {
+                    src.sample_interior(t, val);
+                } else {
+                    src.sample_border(t, val);
+                }
+                for (d, &v) in dst.iter_mut().zip(val.iter()) {
+                    d.write(v);
+                }
+            }
+        }
+    }
 }

@@ -1,0 +1,105 @@
+#!/usr/bin/env python3
+"""Undistortion of a 1280x1024 RGB f32 frame: OpenCV vs bronchosim, timed in one run.
+
+OpenCV: cv2.initUndistortRectifyMap(K, D, I, K, size, CV_32FC1) and
+cv2.remap(img, map_x, map_y, INTER_LINEAR, BORDER_CONSTANT). bronchosim:
+UndistortMap::for_camera and remap_bilinear, via `examples/undistort_timing.rs` built in
+release mode. Both at the default thread count and with one thread; medians of REPS runs,
+best of ROUNDS alternating rounds (the machine is shared). Ratio = bronchosim / OpenCV time
+(below 1 means bronchosim is faster).
+
+Both sides run as child processes with the same environment. Each repetition allocates
+its outputs (10 MB of maps, 16 MB of image); with glibc's default trim threshold those pages
+can go back to the kernel after every call and fault in again, which can cost more than the
+arithmetic. So everything is timed twice: with glibc's defaults, and with
+GLIBC_TUNABLES trim_threshold=1 GiB, mmap_threshold=32 MiB for both sides (the allocation pattern of a
+long-running pipeline, where maps and frames are reused).
+
+    /work/venv/bin/python bench/undistort_vs_opencv.py [REPS] [ROUNDS]
+"""
+import json
+import os
+import subprocess
+import sys
+import time
+
+import cv2
+import numpy as np
+
+W, H = 1280, 1024
+K = np.array([[800.0, 0.0, 639.5], [0.0, 800.0, 511.5], [0.0, 0.0, 1.0]])
+D = np.array([-0.35, 0.12, 0.001, 0.0015, 0.0])
+
+
+def median_ms(reps, f):
+    f()
+    t = []
+    for _ in range(reps):
+        s = time.perf_counter()
+        f()
+        t.append((time.perf_counter() - s) * 1e3)
+    return float(np.median(t))
+
+
+def opencv(reps, threads):
+    cv2.setNumThreads(threads)
+    img = ((np.arange(W * H * 3) % 251) / 250.0).astype(np.float32).reshape(H, W, 3)
+    map_ms = median_ms(reps, lambda: cv2.initUndistortRectifyMap(K, D, np.eye(3), K, (W, H), cv2.CV_32FC1))
+    mx, my = cv2.initUndistortRectifyMap(K, D, np.eye(3), K, (W, H), cv2.CV_32FC1)
+    remap_ms = median_ms(reps, lambda: cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT))
+    return dict(map_ms=map_ms, remap_ms=remap_ms)
+
+
+def child_env(threads, tunables):
+    env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
+    env.pop("GLIBC_TUNABLES", None)
+    if tunables:
+        env["GLIBC_TUNABLES"] = tunables
+    return env
+
+
+def opencv_child(reps, threads, tunables):
+    cmd = [sys.executable, os.path.abspath(__file__), "--opencv-worker", str(reps), str(threads)]
+    out = subprocess.run(cmd, env=child_env(threads, tunables), capture_output=True, text=True, check=True)
+    return json.loads(out.stdout)
+
+
+def ours(exe, reps, threads, tunables):
+    out = subprocess.run([exe, str(reps)], env=child_env(threads, tunables), capture_output=True, text=True,
+                         check=True).stdout
+    return json.loads(out)
+
+
+def main():
+    if sys.argv[1:2] == ["--opencv-worker"]:
+        print(json.dumps(opencv(int(sys.argv[2]), int(sys.argv[3]))))
+        return
+    reps = int(sys.argv[1]) if len(sys.argv) > 1 else 20
+    rounds = int(sys.argv[2]) if len(sys.argv) > 2 else 3
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    subprocess.run(["cargo", "build", "--release", "--quiet", "--example", "undistort_timing"], cwd=root, check=True)
+    meta = json.loads(subprocess.run(["cargo", "metadata", "--format-version", "1", "--no-deps"], cwd=root,
+                                     capture_output=True, text=True, check=True).stdout)
+    exe = os.path.join(meta["target_directory"], "release", "examples", "undistort_timing")
+    cores = os.cpu_count()
+    print(f"OpenCV {cv2.__version__}, {W}x{H} RGB f32, median of {reps} reps, best of {rounds} rounds, {cores} cores")
+    for label, tunables in (("glibc default", ""), ("no trim, mmap >32 MB", "glibc.malloc.trim_threshold=1073741824:glibc.malloc.mmap_threshold=33554432")):
+        for threads in (cores, 1):
+            best_cv = dict(map_ms=float("inf"), remap_ms=float("inf"))
+            best_us = dict(best_cv)
+            for _ in range(rounds):
+                cv = opencv_child(reps, threads, tunables)
+                us = ours(exe, reps, threads, tunables)
+                for k in best_cv:
+                    best_cv[k] = min(best_cv[k], cv[k])
+                    best_us[k] = min(best_us[k], us[k])
+            best_cv["total"] = best_cv["map_ms"] + best_cv["remap_ms"]
+            best_us["total"] = best_us["map_ms"] + best_us["remap_ms"]
+            for k, name in (("map_ms", "initUndistortRectifyMap"), ("remap_ms", "remap INTER_LINEAR"),
+                            ("total", "map + remap")):
+                print(f"{label:21s} threads={threads} {name:24s} OpenCV {best_cv[k]:7.2f} ms  "
+                      f"bronchosim {best_us[k]:7.2f} ms  ratio {best_us[k] / best_cv[k]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
