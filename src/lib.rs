@@ -10,6 +10,7 @@ pub mod inspect;
 pub mod io;
 pub mod math;
 pub mod mesh;
+pub mod texture;
 pub mod volume;
 
 pub use error::{Error, Result};
