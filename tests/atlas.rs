@@ -342,7 +342,7 @@ fn fill_pushes_colours_within_charts_and_into_the_gutter() {
         .collect();
     let mut covered = vec![false; w * h];
     let mut rgb = vec![f32::NAN; 3 * w * h];
-    let mut set = |x: usize, y: usize, c: [f32; 3], rgb: &mut Vec<f32>, covered: &mut Vec<bool>| {
+    let set = |x: usize, y: usize, c: [f32; 3], rgb: &mut [f32], covered: &mut [bool]| {
         covered[y * w + x] = true;
         rgb[3 * (y * w + x)..3 * (y * w + x) + 3].copy_from_slice(&c);
     };

@@ -189,13 +189,13 @@ fn validate(mesh: &TriMesh, opts: &AtlasOptions) -> Result<()> {
             opts.max_chart_normal_angle_deg
         ));
     }
-    if !(opts.max_chart_stretch >= 1.0) {
+    if opts.max_chart_stretch.is_nan() || opts.max_chart_stretch < 1.0 {
         return bad(format!(
             "max_chart_stretch must be at least 1, got {}",
             opts.max_chart_stretch
         ));
     }
-    if !(opts.initial_chart_area_mm2 > 0.0) {
+    if opts.initial_chart_area_mm2.is_nan() || opts.initial_chart_area_mm2 <= 0.0 {
         return bad(format!(
             "initial_chart_area_mm2 must be positive, got {}",
             opts.initial_chart_area_mm2
