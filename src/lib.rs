@@ -13,6 +13,7 @@ pub mod mesh;
 pub mod phantom;
 pub mod raycast;
 pub mod shading;
+pub mod texture;
 pub mod volume;
 
 pub use error::{Error, Result};

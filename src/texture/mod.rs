@@ -1,0 +1,3 @@
+//! Texturing the lumen mesh: the texture atlas, texel geometry and hole filling (paper §2.4).
+
+pub mod atlas;
