@@ -15,5 +15,6 @@ pub mod raycast;
 pub mod shading;
 pub mod texture;
 pub mod volume;
+pub mod workflow;
 
 pub use error::{Error, Result};

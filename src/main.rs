@@ -2,6 +2,10 @@
 
 use anyhow::Context;
 use bronchosim::inspect::{inspect_case, InspectOptions};
+use bronchosim::math::Point3;
+use bronchosim::workflow::segment::{
+    default_segment_out, parse_point, segment_command, SegmentCommandOptions,
+};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -30,10 +34,79 @@ enum Command {
         #[arg(long)]
         quick: bool,
     },
+    /// Segment the airway in a CT and extract the lumen mesh (segmentation.nii.gz, lumen.ply/.obj/.glb,
+    /// summary.json).
+    Segment {
+        /// A case folder, a NIfTI file (.nii / .nii.gz) or a DICOM folder.
+        input: PathBuf,
+        /// Output folder (default: <input>_segment beside the input).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Seed point inside the trachea, world mm (RAS): X,Y,Z. Default: found automatically.
+        #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
+        seed: Option<[f64; 3]>,
+        /// First upper threshold of the adaptive region growing (HU).
+        #[arg(long, default_value_t = -950.0, allow_hyphen_values = true)]
+        start_hu: f32,
+        /// Highest threshold the adaptive region growing may reach (HU).
+        #[arg(long, default_value_t = -500.0, allow_hyphen_values = true)]
+        max_hu: f32,
+        /// Threshold increase per step (HU).
+        #[arg(long, default_value_t = 25.0)]
+        step_hu: f32,
+        /// A step whose volume grows by more than this factor is a leak: growing stops before it.
+        #[arg(long, default_value_t = 2.0)]
+        leak_growth_limit: f64,
+        /// Radius of the morphological closing (mm).
+        #[arg(long, default_value_t = 1.0)]
+        closing_mm: f64,
+        /// Marching-cubes level between lumen air and wall (HU).
+        #[arg(long, default_value_t = -500.0, allow_hyphen_values = true)]
+        iso_hu: f32,
+        /// Target edge length of the decimated lumen mesh (mm).
+        #[arg(long, default_value_t = 0.7)]
+        edge_mm: f64,
+        /// Replace an existing output folder.
+        #[arg(long)]
+        force: bool,
+    },
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Segment {
+            input,
+            out,
+            seed,
+            start_hu,
+            max_hu,
+            step_hu,
+            leak_growth_limit,
+            closing_mm,
+            iso_hu,
+            edge_mm,
+            force,
+        } => {
+            let mut opts = SegmentCommandOptions {
+                force,
+                ..Default::default()
+            };
+            opts.segment.seed_world = seed.map(|[x, y, z]| Point3::new(x, y, z));
+            opts.segment.growth.start_hu = start_hu;
+            opts.segment.growth.max_hu = max_hu;
+            opts.segment.growth.step_hu = step_hu;
+            opts.segment.growth.leak_growth_limit = leak_growth_limit;
+            opts.segment.closing_radius_mm = closing_mm;
+            opts.mesh.iso_hu = iso_hu;
+            opts.mesh.decimate.target_edge_mm = edge_mm;
+            let out = out.unwrap_or_else(|| default_segment_out(&input));
+            let summary = segment_command(&input, &out, &opts)
+                .with_context(|| format!("segment {}", input.display()))?;
+            if !cli.quiet {
+                print!("{}", summary.to_text(&out));
+            }
+            Ok(())
+        }
         Command::Inspect { case, json, quick } => {
             let opts = InspectOptions {
                 decode_all_frames: !quick,

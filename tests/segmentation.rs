@@ -2,7 +2,10 @@
 //! (ATM'22 masks made CT-like), and SimpleITK's ConnectedThreshold.
 
 use bronchosim::math::Point3;
+use bronchosim::mesh::lumen::{lumen_mesh, LumenMeshOptions};
+use bronchosim::mesh::metrics::deviation;
 use bronchosim::phantom::{make_ct_phantom, CtPhantom, CtPhantomOptions};
+use bronchosim::volume::marching_cubes;
 use bronchosim::volume::segment::{segment_airway, SegmentOptions};
 use bronchosim::volume::Volume;
 
@@ -50,6 +53,36 @@ fn leaked_voxels(seg: &Volume<u8>, truth: &Volume<u8>) -> usize {
 
 fn check_phantom(ph: &CtPhantom, name: &str) {
     let seg = segment_airway(&ph.ct, &SegmentOptions::default()).unwrap();
+    // The lumen mesh (marching cubes at -500 HU, Taubin, decimation) lies on the true lumen
+    // surface: mean |SDF| at its vertices within a quarter of the smallest voxel spacing.
+    let (mesh, report) = lumen_mesh(&ph.ct, &seg.mask, &LumenMeshOptions::default()).unwrap();
+    let min_spacing = ph
+        .ct
+        .spacing()
+        .iter()
+        .cloned()
+        .fold(f64::INFINITY, f64::min);
+    let dist: Vec<f64> = mesh
+        .positions
+        .iter()
+        .map(|p| {
+            ph.tree
+                .lumen_sdf(Point3::new(p.x as f64, p.y as f64, p.z as f64))
+                .abs()
+        })
+        .collect();
+    let mean_dist = dist.iter().sum::<f64>() / dist.len() as f64;
+    println!(
+        "{name}: lumen mesh {} triangles (marching cubes {}), mean distance to the true surface {:.4} mm, bound {:.4} mm",
+        mesh.triangles.len(),
+        report.marching_cubes.triangles,
+        mean_dist,
+        0.25 * min_spacing
+    );
+    assert!(
+        mean_dist <= 0.25 * min_spacing,
+        "{name}: mesh {mean_dist:.4} mm from the true surface"
+    );
     let sp = ph.ct.spacing();
     println!(
         "{name}: dims {:?} seed {:?} ({:.1}, {:.1}, {:.1}) threshold {} exploded {} volume {:.2} ml truth {:.2} ml branches {} (truth {})",
@@ -149,7 +182,10 @@ fn automatic_seed_and_given_seed_agree() {
 /// segmentation, scored against the mask.
 fn check_atm(file: &str, downsample: usize) {
     use bronchosim::phantom::from_mask::{ct_from_mask_file, FromMaskOptions};
-    let path = std::path::Path::new("/work/shared/data/atm22-airways").join(file);
+    // shared/ sits beside the repository (CI clones main with shared/ next to it).
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/atm22-airways")
+        .join(file);
     if !path.exists() {
         // The shared data folder is outside the repository; say so rather than pass silently.
         panic!(
@@ -179,6 +215,28 @@ fn check_atm(file: &str, downsample: usize) {
         ph.ct.dims, ph.has_body, seg.seed_voxel, seg.threshold_hu, seg.exploded, seg.volume_ml, seg.branch_count, 100.0 * fp
     );
     assert!(dice >= 0.90, "{file}: Dice {dice:.4}");
+    // The lumen mesh follows the mask's surface (the marching-cubes surface of the binary
+    // mask at 0.5) to within one voxel on average.
+    let (mesh, _) = lumen_mesh(&ph.ct, &seg.mask, &LumenMeshOptions::default()).unwrap();
+    let mask_surface = marching_cubes(&ph.truth_mask.map(|v| v as f32), 0.5, None).unwrap();
+    let dev = deviation(&mesh, &mask_surface);
+    let voxel = ph
+        .ct
+        .spacing()
+        .iter()
+        .cloned()
+        .fold(f64::INFINITY, f64::min);
+    println!(
+        "  lumen mesh: {} triangles, mean distance to the mask surface {:.3} mm (max {:.2}), voxel {voxel:.3} mm",
+        mesh.triangles.len(),
+        dev.mean_mm,
+        dev.max_mm
+    );
+    assert!(
+        dev.mean_mm < voxel,
+        "{file}: mesh {:.3} mm from the mask surface",
+        dev.mean_mm
+    );
     assert!(
         fp <= 0.02,
         "{file}: false-positive volume {:.2}% of the truth",

@@ -9,6 +9,7 @@ pub mod frame_source;
 pub mod frames;
 pub mod mesh_export;
 pub mod nifti;
+pub mod output_dir;
 pub mod paths;
 pub mod poses;
 pub mod video;

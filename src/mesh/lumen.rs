@@ -9,6 +9,7 @@ use super::decimate::{decimate, DecimateOptions, DecimateReport};
 use super::metrics::{deviation, mesh_stats, Deviation, MeshStats};
 use super::smooth::{taubin, TaubinOptions};
 use super::TriMesh;
+use crate::volume::region_grow::flood_fill;
 use crate::volume::{marching_cubes, Volume};
 use crate::{Error, Result};
 
@@ -77,8 +78,43 @@ pub fn lumen_mesh(
     }
     let spacing = ct.spacing();
     let radius = spacing.map(|s| (opts.region_dilation_mm.max(0.0) / s).ceil() as usize);
-    let region = box_dilate(seg_mask, radius);
+    let search = box_dilate(seg_mask, radius);
+    let region = lumen_region(ct, seg_mask, &search, opts.iso_hu);
     lumen_mesh_in_region(ct, &region, opts)
+}
+
+/// The voxels whose values may shape the inner lumen surface: the air (below `iso_hu`) inside
+/// `search` that is 6-connected to the segmentation, plus one voxel around it.
+///
+/// Air beyond the airway wall (lung parenchyma, about -850 HU) also lies below the level; where
+/// the wall is thinner than the search margin it would otherwise give a second, outer surface.
+/// Connectivity to the segmented lumen tells the two apart: the wall separates them.
+pub fn lumen_region(
+    ct: &Volume<f32>,
+    seg_mask: &Volume<u8>,
+    search: &Volume<u8>,
+    iso_hu: f32,
+) -> Volume<u8> {
+    let seeds: Vec<u32> = (0..ct.len())
+        .filter(|&i| seg_mask.data[i] != 0 && ct.data[i] < iso_hu)
+        .map(|i| i as u32)
+        .collect();
+    let mut label = vec![0u8; ct.len()];
+    flood_fill(
+        ct.dims,
+        &mut label,
+        &seeds,
+        1,
+        |i| search.data[i] != 0 && ct.data[i] < iso_hu,
+        None,
+        usize::MAX,
+    );
+    let air = Volume {
+        dims: ct.dims,
+        affine: ct.affine,
+        data: label,
+    };
+    box_dilate(&air, [1, 1, 1])
 }
 
 /// Lumen mesh of `ct` inside an already dilated `region` (nonzero = may hold lumen surface).

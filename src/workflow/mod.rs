@@ -1,0 +1,4 @@
+//! The commands a person runs, each a whole job from input folder to output folder:
+//! they chain the stages and write results atomically. `main.rs` only parses and calls these.
+
+pub mod segment;
