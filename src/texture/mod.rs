@@ -1,3 +1,20 @@
-//! Texturing the lumen mesh: the texture atlas, texel geometry and hole filling (paper §2.4).
+//! Texturing the lumen mesh (paper §2.4): the texture atlas, texel geometry and hole filling;
+//! texel-centric de-lighting of each frame by its Psi; fusion of the frames into one albedo
+//! atlas; the albedo PNG and textured glTF outputs.
+//!
+//! ```text
+//! Atlas ─ rasterize_texels ─► TexelGeometry ─ TexelSet::new ─► TexelSet
+//! TexelSet + frames (Frame, pose, PsiModel, depth) ─ fuse ─► FusedTexture ─ filled ─► albedo.png, airway.glb
+//! ```
 
 pub mod atlas;
+mod blur;
+pub mod delight;
+pub mod fusion;
+pub mod output;
+pub mod texels;
+
+pub use delight::{delight_frame, DelightOptions, DelitFrame, Observation};
+pub use fusion::{fuse, FrameStream, FusedTexture, FusionMethod, FusionOptions, FusionStats};
+pub use output::{encode_albedo, encode_coverage, write_texture_outputs, AlbedoImage, TextureOutputs};
+pub use texels::{TexelRect, TexelSet};
