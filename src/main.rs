@@ -3,6 +3,7 @@
 use anyhow::Context;
 use bronchosim::inspect::{inspect_case, InspectOptions};
 use bronchosim::math::Point3;
+use bronchosim::workflow::build::{build_model, BuildOptions};
 use bronchosim::workflow::segment::{
     default_segment_out, parse_point, segment_command, SegmentCommandOptions,
 };
@@ -70,10 +71,65 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+    /// Build the photo-realistic model of a case: segment, mesh, atlas, fit Psi per frame,
+    /// de-light and fuse the texture; writes the model folder (model.json, airway.glb, albedo.png,
+    /// shading.json, segmentation.nii.gz, report.html).
+    Build {
+        /// The case folder (see CASE_FORMAT.md).
+        case: PathBuf,
+        /// The model folder to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// Texel size of the albedo atlas (mm).
+        #[arg(long, default_value_t = 0.15)]
+        texel_mm: f64,
+        /// Fusion of the de-lit frames: "max" (the paper's max-weight choice with smoothed
+        /// weights) or "average" (predicted-intensity-weighted average).
+        #[arg(long, default_value = "max")]
+        fusion: String,
+        /// Replace an existing model folder.
+        #[arg(long)]
+        force: bool,
+    },
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Build {
+            case,
+            out,
+            texel_mm,
+            fusion,
+            force,
+        } => {
+            let mut opts = BuildOptions {
+                force,
+                quiet: cli.quiet,
+                ..Default::default()
+            };
+            opts.atlas.texel_mm = texel_mm;
+            opts.fusion.method = match fusion.as_str() {
+                "max" => bronchosim::texture::fusion::FusionMethod::MaxWeightSmoothed { sigma_texels: 2.0 },
+                "average" => bronchosim::texture::fusion::FusionMethod::WeightedAverage,
+                other => anyhow::bail!("--fusion {other}: expected max or average"),
+            };
+            let m = build_model(&case, &out, &opts).with_context(|| format!("build {}", case.display()))?;
+            if !cli.quiet {
+                println!(
+                    "built {} from {} frames in {:.1} s: {} triangles, atlas {}x{} ({} of {} texels seen), mean R² of Psi {:.3}",
+                    out.display(),
+                    m.counts.frames,
+                    m.timings.total,
+                    m.counts.triangles,
+                    m.counts.atlas_size[0],
+                    m.counts.atlas_size[1],
+                    m.counts.covered_texels,
+                    m.counts.chart_texels,
+                    m.mean_r2
+                );
+            }
+            Ok(())
+        }
         Command::Segment {
             input,
             out,

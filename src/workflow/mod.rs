@@ -1,4 +1,7 @@
 //! The commands a person runs, each a whole job from input folder to output folder:
 //! they chain the stages and write results atomically. `main.rs` only parses and calls these.
 
+pub mod build;
+pub mod progress;
+pub mod report;
 pub mod segment;

@@ -1,0 +1,406 @@
+//! `bronchosim build CASE --out MODEL`: the whole pipeline of the paper (Fig. 1), written as
+//! the model folder of DESIGN.md.
+//!
+//! inspect → segment → lumen mesh → atlas → per frame (ray cast, samples, Psi fit) →
+//! de-light and fuse (two streaming passes over the frames) → model folder.
+
+use crate::camera::Camera;
+use crate::io::case::Case;
+use crate::io::frame_source::FrameSource;
+use crate::io::frames::Frame;
+use crate::io::nifti::write_nifti;
+use crate::io::output_dir::OutputDir;
+use crate::io::poses::PoseEntry;
+use crate::math::Affine;
+use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
+use crate::shading::fit::{fit_psi, FitOptions};
+use crate::shading::psi::PsiModel;
+use crate::shading::samples::{extract_samples, SampleOptions, SampleSet};
+use crate::shading::weights::{density_weights, WeightOptions};
+use crate::texture::atlas::{build_atlas, rasterize_texels, AtlasOptions};
+use crate::texture::delight::Observation;
+use crate::texture::fusion::{fuse, FrameStream, FusionOptions};
+use crate::texture::output::write_texture_outputs;
+use crate::texture::texels::TexelSet;
+use crate::workflow::progress::Progress;
+use crate::workflow::report::{write_report, ReportFrame, ReportInputs};
+use crate::workflow::segment::{segment_and_mesh, SegmentCommandOptions};
+use crate::{Error, Result};
+use serde::Serialize;
+use std::path::Path;
+use std::time::Instant;
+
+/// Version of the model folder layout (model.json `format_version`).
+pub const MODEL_FORMAT_VERSION: u32 = 1;
+
+/// Options of the whole build; every stage's options with their defaults.
+#[derive(Clone, Debug, Default)]
+pub struct BuildOptions {
+    /// Segmentation and lumen mesh.
+    pub segment: SegmentCommandOptions,
+    /// Texture atlas (texel size in mm, gutter).
+    pub atlas: AtlasOptions,
+    /// Which pixels obey the shading model.
+    pub samples: SampleOptions,
+    /// The Psi fit.
+    pub fit: FitOptions,
+    /// De-lighting and fusion.
+    pub fusion: FusionOptions,
+    /// Replace an existing model folder.
+    pub force: bool,
+    /// No progress bars.
+    pub quiet: bool,
+}
+
+/// Fit quality of one frame.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameFit {
+    /// Frame index (poses order).
+    pub frame: usize,
+    /// Samples used in the fit.
+    pub samples: usize,
+    /// Weighted RMS residual per channel (linear intensity).
+    pub rms: [f64; 3],
+    /// Coefficient of determination of Psi against the samples, per channel.
+    pub r2: [f64; 3],
+    /// True when the positivity-constrained fallback was used in some channel.
+    pub constrained: bool,
+}
+
+/// Seconds per stage.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct BuildTimings {
+    /// Reading and validating the case.
+    pub read_case: f64,
+    /// Region growing and morphology.
+    pub segment: f64,
+    /// Marching cubes, smoothing, decimation.
+    pub mesh: f64,
+    /// Atlas and texel rasterisation.
+    pub atlas: f64,
+    /// Per-frame ray cast, samples and Psi fit (all frames).
+    pub fit: f64,
+    /// De-lighting and fusion (all frames, both passes).
+    pub fusion: f64,
+    /// Writing the model folder and the report.
+    pub write: f64,
+    /// Everything.
+    pub total: f64,
+}
+
+/// model.json: the manifest of a model folder.
+#[derive(Clone, Debug, Serialize)]
+pub struct ModelManifest {
+    /// Layout version of the folder.
+    pub format_version: u32,
+    /// bronchosim version that wrote it.
+    pub generator: String,
+    /// Input files.
+    pub inputs: ModelInputs,
+    /// Sizes of what was built.
+    pub counts: ModelCounts,
+    /// Seconds per stage.
+    pub timings: BuildTimings,
+    /// Fit quality per frame.
+    pub fit_quality: Vec<FrameFit>,
+    /// Mean R² of Psi over frames and channels.
+    pub mean_r2: f64,
+    /// The camera of the training frames.
+    pub camera: Camera,
+    /// Scale from the fused (relative) albedo to albedo.png's linear values.
+    pub albedo_scale: f32,
+    /// Mean L2 stretch of the atlas.
+    pub atlas_mean_l2_stretch: f64,
+    /// Atlas utilisation (covered / all texels).
+    pub atlas_utilisation: f64,
+}
+
+/// Input files of a model.
+#[derive(Clone, Debug, Serialize)]
+pub struct ModelInputs {
+    /// The case folder.
+    pub case: String,
+    /// The CT.
+    pub ct: String,
+    /// The camera file.
+    pub camera: String,
+    /// poses.json.
+    pub poses: String,
+    /// frames/ or the video.
+    pub frames: String,
+}
+
+/// Sizes of a model.
+#[derive(Clone, Debug, Serialize)]
+pub struct ModelCounts {
+    /// Frames used.
+    pub frames: usize,
+    /// Lumen mesh triangles.
+    pub triangles: usize,
+    /// Atlas size in texels.
+    pub atlas_size: [u32; 2],
+    /// Texels on a chart.
+    pub chart_texels: usize,
+    /// Texels seen by at least one frame.
+    pub covered_texels: usize,
+    /// Atlas charts.
+    pub charts: usize,
+    /// Segmented airway volume (ml).
+    pub airway_volume_ml: f64,
+}
+
+/// shading.json.
+#[derive(Clone, Debug, Serialize, serde::Deserialize)]
+pub struct ShadingFile {
+    /// "paper": one Psi per viewpoint (Chung et al. 2004, eq. 2–5).
+    pub model: String,
+    /// The fitted viewpoints, in frame order.
+    pub viewpoints: Vec<PsiModel>,
+}
+
+/// The pixels of a frame that obey the model, and the fitted Psi.
+fn fit_frame(
+    frame: &Frame,
+    g: &GBuffer,
+    pose: &Affine,
+    opts: &BuildOptions,
+) -> Result<(SampleSet, PsiModel, FrameFit)> {
+    let samples = extract_samples(&g.gamma, &g.z, &frame.rgb, &opts.samples);
+    if samples.len() < 50 {
+        return Err(Error::Other(format!(
+            "too few pixels obey the shading model ({} samples; excluded: {:?}): is the pose registered to the CT?",
+            samples.len(),
+            samples.excluded
+        )));
+    }
+    let weights = density_weights(&samples, &WeightOptions::default());
+    let fit = fit_psi(&samples, &weights.weights, &opts.fit)?;
+    let mut model = fit.model;
+    model.camera_to_world = row_major(pose);
+    let r2 = r_squared(&samples, &model);
+    let ff = FrameFit {
+        frame: 0,
+        samples: samples.len(),
+        rms: model.rms_residual,
+        r2,
+        constrained: fit.channels.iter().any(|c| c.constrained),
+    };
+    Ok((samples, model, ff))
+}
+
+/// R² of Psi against the samples' pixel values, per channel (unweighted).
+pub fn r_squared(s: &SampleSet, m: &PsiModel) -> [f64; 3] {
+    let mut out = [0.0; 3];
+    for (ch, o) in out.iter_mut().enumerate() {
+        let vals = &s.rgb[ch];
+        let mean = vals.iter().map(|&v| v as f64).sum::<f64>() / vals.len().max(1) as f64;
+        let (mut ss_res, mut ss_tot) = (0.0, 0.0);
+        for i in 0..s.len() {
+            let p = m.eval(ch, s.gamma[i] as f64, s.z[i] as f64);
+            let v = vals[i] as f64;
+            ss_res += (v - p) * (v - p);
+            ss_tot += (v - mean) * (v - mean);
+        }
+        *o = if ss_tot > 0.0 { 1.0 - ss_res / ss_tot } else { 0.0 };
+    }
+    out
+}
+
+/// A 4x4 matrix as 16 row-major numbers.
+fn row_major(m: &Affine) -> [f64; 16] {
+    let mut a = [0.0; 16];
+    for r in 0..4 {
+        for c in 0..4 {
+            a[4 * r + c] = m[(r, c)];
+        }
+    }
+    a
+}
+
+/// The frames of a case for the fusion passes: decoded again for each pass (never all in
+/// memory), each with its G-buffer depth and fitted Psi.
+struct CaseFrames<'a> {
+    case: &'a Case,
+    scene: &'a Scene,
+    rays: &'a RayTable,
+    psi: &'a [PsiModel],
+    source: Option<FrameSource>,
+    next: usize,
+    frame: Frame,
+    depth: Vec<f32>,
+    progress: Progress,
+}
+
+impl FrameStream for CaseFrames<'_> {
+    fn frame_count(&self) -> usize {
+        self.psi.len()
+    }
+
+    fn observation(&mut self, index: usize) -> Result<Observation<'_>> {
+        if self.source.is_none() || index < self.next {
+            self.source = Some(self.case.frame_source()?);
+            self.next = 0;
+        }
+        let src = self.source.as_mut().expect("opened above");
+        while self.next <= index {
+            let f = src
+                .next()
+                .ok_or_else(|| Error::Other(format!("frame {index} missing from the frame source")))??;
+            if self.next == index {
+                self.frame = f;
+            }
+            self.next += 1;
+        }
+        let pose: &PoseEntry = &self.case.poses[index];
+        self.depth = cast_frame_with(self.scene, self.rays, &pose.camera_to_world).z;
+        self.progress.inc();
+        Ok(Observation {
+            frame: &self.frame,
+            camera: &self.case.camera,
+            camera_to_world: &self.case.poses[index].camera_to_world,
+            psi: &self.psi[index],
+            depth: &self.depth,
+        })
+    }
+}
+
+/// Build the model of the case in `case_dir` into `out` (atomically).
+pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<ModelManifest> {
+    let t_all = Instant::now();
+    let out_dir = OutputDir::create(out, opts.force)?;
+    let mut timings = BuildTimings::default();
+
+    let t = Instant::now();
+    let case = Case::open(case_dir)?;
+    timings.read_case = t.elapsed().as_secs_f64();
+
+    let seg_opts = SegmentCommandOptions {
+        force: false,
+        ..opts.segment.clone()
+    };
+    let (seg, mesh, _mesh_report, [t_seg, t_mesh]) = segment_and_mesh(&case.ct, &seg_opts)?;
+    timings.segment = t_seg;
+    timings.mesh = t_mesh;
+
+    let t = Instant::now();
+    let atlas = build_atlas(&mesh, &opts.atlas)?;
+    let geo = rasterize_texels(&atlas, &mesh)?;
+    let texels = TexelSet::new(&geo)?;
+    timings.atlas = t.elapsed().as_secs_f64();
+
+    // Pass 1: ray cast, samples and the Psi fit of every frame.
+    let t = Instant::now();
+    let scene = Scene::new(&atlas.mesh)?;
+    let rays = RayTable::new(&case.camera);
+    let n = case.frame_count();
+    let mut psi = Vec::with_capacity(n);
+    let mut fits = Vec::with_capacity(n);
+    let mut report_frames = Vec::new();
+    let report_every = (n / 3).max(1);
+    let progress = Progress::new("fit Psi", n as u64, opts.quiet);
+    for (i, frame) in case.frame_source()?.enumerate() {
+        let frame = frame?;
+        let pose = &case.poses[i].camera_to_world;
+        let g = cast_frame_with(&scene, &rays, pose);
+        let (samples, model, mut ff) = fit_frame(&frame, &g, pose, opts)
+            .map_err(|e| Error::Other(format!("frame {i} ({}): {e}", frame_name(&case, i))))?;
+        ff.frame = i;
+        if i % report_every == 0 && report_frames.len() < 3 {
+            report_frames.push(ReportFrame {
+                index: i,
+                frame,
+                gbuffer: g,
+                samples,
+                psi: model.clone(),
+            });
+        }
+        psi.push(model);
+        fits.push(ff);
+        progress.inc();
+    }
+    progress.finish();
+    timings.fit = t.elapsed().as_secs_f64();
+
+    // Pass 2 (and 3 for the max-weight method): de-light and fuse, streaming the frames.
+    let t = Instant::now();
+    let passes = 2;
+    let mut stream = CaseFrames {
+        case: &case,
+        scene: &scene,
+        rays: &rays,
+        psi: &psi,
+        source: None,
+        next: 0,
+        frame: Frame::new(1, 1),
+        depth: Vec::new(),
+        progress: Progress::new("de-light + fuse", (passes * n) as u64, opts.quiet),
+    };
+    let fused = fuse(&texels, &mut stream, &opts.fusion)?;
+    stream.progress.finish();
+    let filled = fused.filled(&texels)?;
+    timings.fusion = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let tex = write_texture_outputs(out_dir.path(), &atlas, &filled, &fused.covered)?;
+    write_nifti(&out_dir.join("segmentation.nii.gz"), &seg.mask)?;
+    let shading = ShadingFile {
+        model: "paper".into(),
+        viewpoints: psi,
+    };
+    write_json(&out_dir.join("shading.json"), &shading)?;
+    let mean_r2 = fits.iter().flat_map(|f| f.r2).sum::<f64>() / (3 * fits.len().max(1)) as f64;
+    let mut manifest = ModelManifest {
+        format_version: MODEL_FORMAT_VERSION,
+        generator: format!("bronchosim {}", env!("CARGO_PKG_VERSION")),
+        inputs: ModelInputs {
+            case: case.dir.display().to_string(),
+            ct: case.ct_source.path().display().to_string(),
+            camera: case.camera_path.display().to_string(),
+            poses: case.poses_path.display().to_string(),
+            frames: case.frames.path().display().to_string(),
+        },
+        counts: ModelCounts {
+            frames: n,
+            triangles: atlas.mesh.triangles.len(),
+            atlas_size: [atlas.width, atlas.height],
+            chart_texels: texels.len(),
+            covered_texels: tex.covered_texels,
+            charts: atlas.chart_count,
+            airway_volume_ml: seg.volume_ml,
+        },
+        timings: timings.clone(),
+        fit_quality: fits,
+        mean_r2,
+        camera: case.camera,
+        albedo_scale: tex.albedo_scale,
+        atlas_mean_l2_stretch: atlas.stats.mean_l2_stretch,
+        atlas_utilisation: atlas.stats.utilisation,
+    };
+    write_report(
+        &out_dir.join("report.html"),
+        &ReportInputs {
+            manifest: &manifest,
+            frames: &report_frames,
+            albedo_png: &std::fs::read(out_dir.join("albedo.png")).map_err(|e| Error::io(out_dir.join("albedo.png"), e))?,
+        },
+    )?;
+    manifest.timings.write = t.elapsed().as_secs_f64();
+    manifest.timings.total = t_all.elapsed().as_secs_f64();
+    write_json(&out_dir.join("model.json"), &manifest)?;
+    out_dir.commit()?;
+    Ok(manifest)
+}
+
+/// A frame's file name (PNG) or index (video), for messages.
+fn frame_name(case: &Case, i: usize) -> String {
+    match &case.poses[i].frame {
+        crate::io::poses::FrameRef::Image(p) => p.display().to_string(),
+        crate::io::poses::FrameRef::VideoIndex(k) => format!("video frame {k}"),
+    }
+}
+
+/// Write a value as pretty JSON, atomically.
+pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| Error::Other(e.to_string()))?;
+    crate::io::atomic::write_bytes_atomic(path, text.as_bytes())
+}

@@ -1,0 +1,221 @@
+//! report.html: one self-contained page (images embedded, opens offline) with the paper's
+//! figures for the user's own data: Fig. 2 (samples in (gamma, z) and the Psi fit), Fig. 3
+//! (frame / predicted shading / extracted texture), the albedo atlas, fit quality over the
+//! video and per-stage timings.
+
+use crate::io::frames::{write_png_srgb8, Frame};
+use crate::raycast::GBuffer;
+use crate::shading::plots::{plot_psi_slices, plot_samples_density};
+use crate::shading::psi::PsiModel;
+use crate::shading::samples::SampleSet;
+use crate::workflow::build::ModelManifest;
+use crate::{Error, Result};
+use base64::Engine;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// One frame shown in the report.
+pub struct ReportFrame {
+    /// Frame index.
+    pub index: usize,
+    /// The linear frame.
+    pub frame: Frame,
+    /// Its geometry buffer.
+    pub gbuffer: GBuffer,
+    /// The samples the fit used.
+    pub samples: SampleSet,
+    /// The fitted Psi.
+    pub psi: PsiModel,
+}
+
+/// What the report shows.
+pub struct ReportInputs<'a> {
+    /// The model manifest (counts, timings, fit quality).
+    pub manifest: &'a ModelManifest,
+    /// A few frames for Fig. 2 and Fig. 3.
+    pub frames: &'a [ReportFrame],
+    /// albedo.png.
+    pub albedo_png: &'a [u8],
+}
+
+fn img_tag(png: &[u8], alt: &str, width: Option<u32>) -> String {
+    let b64 = base64::engine::general_purpose::STANDARD.encode(png);
+    let w = width.map(|w| format!(" width=\"{w}\"")).unwrap_or_default();
+    format!("<img alt=\"{alt}\"{w} src=\"data:image/png;base64,{b64}\">")
+}
+
+fn png_of(frame: &Frame, tmp: &Path, name: &str) -> Result<Vec<u8>> {
+    let p = tmp.join(name);
+    write_png_srgb8(&p, frame)?;
+    std::fs::read(&p).map_err(|e| Error::io(&p, e))
+}
+
+/// Fig. 3 of the paper for one frame: the predicted shading Psi(gamma, z) per pixel and the
+/// extracted texture (frame / Psi), both scaled for display.
+fn shading_and_texture(f: &ReportFrame) -> (Frame, Frame) {
+    let (w, h) = (f.frame.width, f.frame.height);
+    let mut shade = Frame::new(w, h);
+    let mut tex = Frame::new(w, h);
+    let mut max_shade = 0f64;
+    let mut vals = Vec::with_capacity((w * h) as usize);
+    for i in 0..(w * h) as usize {
+        let g = &f.gbuffer;
+        if g.tri[i] == u32::MAX || g.gamma[i] <= 0.0 {
+            vals.push(None);
+            continue;
+        }
+        let p = f.psi.eval_rgb(g.gamma[i] as f64, g.z[i] as f64);
+        max_shade = max_shade.max(p[1]);
+        vals.push(Some(p));
+    }
+    let mut tex_vals: Vec<f32> = Vec::new();
+    for (i, v) in vals.iter().enumerate() {
+        if let Some(p) = v {
+            for ch in 0..3 {
+                let s = (p[ch] / max_shade.max(1e-12)) as f32;
+                shade.rgb[3 * i + ch] = s;
+                if p[ch] > 1e-6 {
+                    let t = f.frame.rgb[3 * i + ch] / p[ch] as f32;
+                    tex.rgb[3 * i + ch] = t;
+                    tex_vals.push(t);
+                }
+            }
+        }
+    }
+    // Texture is relative albedo: scale its 99th percentile to 0.9 for display.
+    if !tex_vals.is_empty() {
+        let k = (tex_vals.len() - 1) * 99 / 100;
+        let p99 = *tex_vals.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+        if p99 > 0.0 {
+            tex.rgb.iter_mut().for_each(|v| *v = (*v * 0.9 / p99).min(1.0));
+        }
+    }
+    (shade, tex)
+}
+
+/// An inline SVG line chart of per-frame values (one polyline per series).
+fn svg_series(title: &str, series: &[(&str, &str, Vec<f64>)], y_range: (f64, f64)) -> String {
+    let (w, h, pad) = (640.0, 200.0, 36.0);
+    let n = series.iter().map(|s| s.2.len()).max().unwrap_or(0).max(2);
+    let (y0, y1) = y_range;
+    let x = |i: usize| pad + (w - 2.0 * pad) * i as f64 / (n - 1) as f64;
+    let y = |v: f64| h - pad - (h - 2.0 * pad) * ((v - y0) / (y1 - y0)).clamp(0.0, 1.0);
+    let mut s = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"11\">\
+         <text x=\"{pad}\" y=\"14\">{title}</text>\
+         <line x1=\"{pad}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" stroke=\"#888\"/>\
+         <line x1=\"{pad}\" y1=\"{pad}\" x2=\"{pad}\" y2=\"{}\" stroke=\"#888\"/>\
+         <text x=\"2\" y=\"{}\">{y1:.2}</text><text x=\"2\" y=\"{}\">{y0:.2}</text>\
+         <text x=\"{}\" y=\"{}\">frame</text>",
+        h - pad,
+        w - pad,
+        h - pad,
+        h - pad,
+        pad + 4.0,
+        h - pad,
+        w / 2.0,
+        h - 6.0
+    );
+    for (k, (name, colour, vals)) in series.iter().enumerate() {
+        let pts: Vec<String> = vals.iter().enumerate().map(|(i, &v)| format!("{:.1},{:.1}", x(i), y(v))).collect();
+        let _ = write!(
+            s,
+            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.5\" points=\"{}\"/>\
+             <text x=\"{}\" y=\"14\" fill=\"{colour}\">{name}</text>",
+            pts.join(" "),
+            w - pad - 60.0 * (series.len() - k) as f64
+        );
+    }
+    s.push_str("</svg>");
+    s
+}
+
+/// Write report.html.
+pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
+    let m = inputs.manifest;
+    let tmp = tempfile::tempdir().map_err(|e| Error::io(std::env::temp_dir(), e))?;
+    let mut html = String::new();
+    html.push_str(
+        "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>bronchosim model report</title>\
+         <style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}\
+         table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}\
+         th{background:#f3f3f3}figure{display:inline-block;margin:6px;vertical-align:top}\
+         figcaption{font-size:12px;color:#555}img{image-rendering:pixelated;border:1px solid #ddd}</style>\
+         </head><body>",
+    );
+    let _ = write!(
+        html,
+        "<h1>bronchosim model report</h1><p>{} — case <code>{}</code>; {} frames; lumen mesh {} triangles; \
+         atlas {}×{} texels ({} charts, utilisation {:.0}%, mean L2 stretch {:.3}); {} of {} chart texels seen by a frame ({:.0}%).</p>",
+        m.generator,
+        m.inputs.case,
+        m.counts.frames,
+        m.counts.triangles,
+        m.counts.atlas_size[0],
+        m.counts.atlas_size[1],
+        m.counts.charts,
+        100.0 * m.atlas_utilisation,
+        m.atlas_mean_l2_stretch,
+        m.counts.covered_texels,
+        m.counts.chart_texels,
+        100.0 * m.counts.covered_texels as f64 / m.counts.chart_texels.max(1) as f64
+    );
+    // Fit quality over the video.
+    html.push_str("<h2>Fit quality of Psi over the video</h2>");
+    let r2 = |c: usize| m.fit_quality.iter().map(|f| f.r2[c]).collect::<Vec<_>>();
+    html.push_str(&svg_series(
+        &format!("R² of Psi against the pixels (mean {:.3})", m.mean_r2),
+        &[("R", "#c33", r2(0)), ("G", "#3a3", r2(1)), ("B", "#33c", r2(2))],
+        (0.0, 1.0),
+    ));
+    // Fig. 2 and Fig. 3 for a few frames.
+    html.push_str("<h2>Shading fit (paper Fig. 2) and de-lighting (paper Fig. 3)</h2>");
+    for f in inputs.frames {
+        let _ = write!(html, "<h3>Frame {}</h3>", f.index);
+        let dens = tmp.path().join(format!("dens{}.png", f.index));
+        plot_samples_density(&f.samples, &dens)?;
+        let mut zs: Vec<f32> = f.samples.z.clone();
+        let k = zs.len() / 2;
+        let zmed = *zs.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1 as f64;
+        let slices = [(zmed - 4.0, zmed - 2.0), (zmed - 1.0, zmed + 1.0), (zmed + 2.0, zmed + 4.0)];
+        let fit = tmp.path().join(format!("fit{}.png", f.index));
+        plot_psi_slices(&f.samples, &f.psi, &slices, &fit)?;
+        let read = |p: &Path| std::fs::read(p).map_err(|e| Error::io(p, e));
+        let (shade, tex) = shading_and_texture(f);
+        let _ = write!(
+            html,
+            "<figure>{}<figcaption>(a) samples in (gamma, z): uneven density</figcaption></figure>\
+             <figure>{}<figcaption>(b) Psi against the samples in depth slices</figcaption></figure><br>\
+             <figure>{}<figcaption>frame</figcaption></figure>\
+             <figure>{}<figcaption>predicted shading Psi(gamma, z)</figcaption></figure>\
+             <figure>{}<figcaption>extracted texture (frame / Psi)</figcaption></figure>\
+             <p>R² {:.3} / {:.3} / {:.3}; samples used {}; excluded: no hit {}, grazing {}, saturated {}, dark {}.</p>",
+            img_tag(&read(&dens)?, "Fig. 2a", Some(420)),
+            img_tag(&read(&fit)?, "Fig. 2b", Some(420)),
+            img_tag(&png_of(&f.frame, tmp.path(), "frame.png")?, "frame", Some(256)),
+            img_tag(&png_of(&shade, tmp.path(), "shade.png")?, "shading", Some(256)),
+            img_tag(&png_of(&tex, tmp.path(), "tex.png")?, "texture", Some(256)),
+            m.fit_quality[f.index].r2[0],
+            m.fit_quality[f.index].r2[1],
+            m.fit_quality[f.index].r2[2],
+            f.samples.len(),
+            f.samples.excluded.no_hit,
+            f.samples.excluded.grazing,
+            f.samples.excluded.saturated,
+            f.samples.excluded.dark,
+        );
+    }
+    html.push_str("<h2>Fused albedo atlas</h2>");
+    html.push_str(&img_tag(inputs.albedo_png, "albedo atlas", Some(1000)));
+    // Timings.
+    let t = &m.timings;
+    let _ = write!(
+        html,
+        "<h2>Timings (s)</h2><table><tr><th>read case</th><th>segment</th><th>mesh</th><th>atlas</th>\
+         <th>fit Psi</th><th>de-light + fuse</th></tr><tr><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td>\
+         <td>{:.2}</td><td>{:.2}</td><td>{:.2}</td></tr></table>",
+        t.read_case, t.segment, t.mesh, t.atlas, t.fit, t.fusion
+    );
+    html.push_str("</body></html>\n");
+    crate::io::atomic::write_bytes_atomic(path, html.as_bytes())
+}
