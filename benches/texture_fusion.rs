@@ -52,7 +52,10 @@ fn bench_fusion(c: &mut Criterion) {
     }
     g.throughput(Throughput::Elements(1));
     g.bench_function("delight_frame_320", |b| {
-        b.iter(|| delight_frame(black_box(&w.texels), &obs[5], &DelightOptions::default()).expect("delight"))
+        b.iter(|| {
+            delight_frame(black_box(&w.texels), &obs[5], &DelightOptions::default())
+                .expect("delight")
+        })
     });
     g.finish();
 }

@@ -54,6 +54,11 @@ pub struct DelightOptions {
     /// Depth tolerance relative to the texel's distance (unitless). Default 0.01. The test
     /// also allows the depth change across the bilinear footprint on a slanted surface.
     pub depth_tolerance_rel: f64,
+    /// Observations whose predicted intensity (Psi luminance) is under this fraction of the
+    /// frame's brightest prediction give no texture (unitless, 0 keeps all). Where Psi predicts
+    /// little light its fit is least reliable (far, grazing) and dividing by it amplifies the
+    /// error (paper: "low intensities often yielded unreliable texture values"). Default 0.05.
+    pub min_relative_weight: f64,
 }
 
 impl Default for DelightOptions {
@@ -71,6 +76,7 @@ impl DelightOptions {
             noise_floor: s.noise_floor,
             depth_tolerance_mm: 0.3,
             depth_tolerance_rel: 0.01,
+            min_relative_weight: 0.05,
         }
     }
 }
@@ -141,6 +147,20 @@ pub(crate) fn max_ray_angle(camera: &Camera) -> f64 {
     best + 0.5 / camera.fx.min(camera.fy).max(1.0)
 }
 
+/// Largest Psi luminance over gamma in [min_gamma, 1] and r in [0, 1] (a 17 x 17 grid).
+fn peak_luminance(psi: &PsiModel, min_gamma: f64) -> f64 {
+    let mut best = 0.0f64;
+    for i in 0..=16 {
+        let gamma = min_gamma + (1.0 - min_gamma) * i as f64 / 16.0;
+        for j in 0..=16 {
+            let z = psi.z_min + (psi.z_max - psi.z_min) * j as f64 / 16.0;
+            let p = psi.eval_rgb(gamma, z);
+            best = best.max(LUMA[0] * p[0] + LUMA[1] * p[1] + LUMA[2] * p[2]);
+        }
+    }
+    best
+}
+
 /// Per-frame constants of the de-lighting.
 pub(crate) struct FrameCtx<'a> {
     rot: [[f64; 3]; 3],
@@ -163,12 +183,18 @@ pub(crate) struct FrameCtx<'a> {
     /// 1.5 px (a bilinear footprint's diagonal plus margin) in normalised image units.
     footprint: f64,
     tan_max: f64,
+    /// Smallest accepted Psi luminance (linear intensity).
+    min_weight: f64,
 }
 
 impl<'a> FrameCtx<'a> {
     /// Check the observation and precompute the frame's transform and thresholds.
     /// `max_angle` is [`max_ray_angle`] of the camera (computed once per video by callers).
-    pub(crate) fn new(obs: &Observation<'a>, opts: &DelightOptions, max_angle: f64) -> Result<Self> {
+    pub(crate) fn new(
+        obs: &Observation<'a>,
+        opts: &DelightOptions,
+        max_angle: f64,
+    ) -> Result<Self> {
         let bad = |m: String| Err(Error::Other(format!("de-lighting: {m}")));
         let (w, h) = (obs.frame.width as usize, obs.frame.height as usize);
         if obs.camera.width as usize != w || obs.camera.height as usize != h {
@@ -194,7 +220,12 @@ impl<'a> FrameCtx<'a> {
             return bad("the camera pose is not finite".into());
         }
         let p = obs.psi;
-        if !(p.c.iter().flatten().chain(p.d.iter().flatten()).all(|x| x.is_finite())
+        if !(p
+            .c
+            .iter()
+            .flatten()
+            .chain(p.d.iter().flatten())
+            .all(|x| x.is_finite())
             && p.z_min.is_finite()
             && p.z_max.is_finite())
         {
@@ -210,6 +241,7 @@ impl<'a> FrameCtx<'a> {
             .filter(|z| z.is_finite())
             .fold(0.0f32, |a, &b| a.max(b)) as f64;
         let min_gamma = (opts.min_gamma as f64).clamp(1e-3, 1.0);
+        let min_weight = opts.min_relative_weight.max(0.0) * peak_luminance(p, min_gamma);
         Ok(FrameCtx {
             rot,
             trans,
@@ -230,6 +262,7 @@ impl<'a> FrameCtx<'a> {
             tol_rel: opts.depth_tolerance_rel.max(0.0),
             footprint: 1.5 / obs.camera.fx.min(obs.camera.fy),
             tan_max: (1.0 - min_gamma * min_gamma).sqrt() / min_gamma,
+            min_weight,
         })
     }
 
@@ -327,13 +360,16 @@ impl<'a> FrameCtx<'a> {
         if !psi.iter().all(|&s| s > 1e-9 && s.is_finite()) {
             return None;
         }
+        let weight = LUMA[0] * psi[0] + LUMA[1] * psi[1] + LUMA[2] * psi[2];
+        if !(weight >= self.min_weight) {
+            return None;
+        }
         let mut value = [0.0f32; 3];
         for ch in 0..3 {
             let top = px[0][ch] + fx * (px[1][ch] - px[0][ch]);
             let bottom = px[2][ch] + fx * (px[3][ch] - px[2][ch]);
             value[ch] = ((top + fy * (bottom - top)) as f64 / psi[ch]) as f32;
         }
-        let weight = LUMA[0] * psi[0] + LUMA[1] * psi[1] + LUMA[2] * psi[2];
         Some((value, weight as f32))
     }
 }

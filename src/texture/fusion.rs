@@ -12,6 +12,9 @@
 //! Memory is O(texels) in both methods, independent of the number of frames: the frames are
 //! streamed ([`FrameStream`]) and re-read in pass 2 instead of keeping their de-lit values.
 
+// Parallel arrays indexed by channel read clearer than zips.
+#![allow(clippy::needless_range_loop)]
+
 use rayon::prelude::*;
 
 use super::atlas::fill_uncovered;

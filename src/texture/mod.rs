@@ -16,5 +16,7 @@ pub mod texels;
 
 pub use delight::{delight_frame, DelightOptions, DelitFrame, Observation};
 pub use fusion::{fuse, FrameStream, FusedTexture, FusionMethod, FusionOptions, FusionStats};
-pub use output::{encode_albedo, encode_coverage, write_texture_outputs, AlbedoImage, TextureOutputs};
+pub use output::{
+    encode_albedo, encode_coverage, write_texture_outputs, AlbedoImage, TextureOutputs,
+};
 pub use texels::{TexelRect, TexelSet};

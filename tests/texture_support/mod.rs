@@ -5,6 +5,7 @@
 //! clipping, 8-bit sRGB), and each frame's fitted Psi.
 
 #![allow(dead_code)]
+#![allow(clippy::needless_range_loop)]
 
 #[path = "../common/airway_mesh.rs"]
 pub mod airway_mesh;
@@ -27,8 +28,12 @@ use rayon::prelude::*;
 pub fn albedo(p: [f64; 3]) -> [f64; 3] {
     let base = [0.78, 0.40, 0.34];
     let slow = 1.0 + 0.08 * (0.15 * p[2] + 0.3 * p[0]).sin();
-    let v1 = (0.5 * p[2] + 0.9 * (0.3 * p[0] + 0.2 * p[1]).sin()).sin().abs();
-    let v2 = (0.45 * p[0] + 0.35 * p[1] + 0.7 * (0.25 * p[2]).sin()).sin().abs();
+    let v1 = (0.5 * p[2] + 0.9 * (0.3 * p[0] + 0.2 * p[1]).sin())
+        .sin()
+        .abs();
+    let v2 = (0.45 * p[0] + 0.35 * p[1] + 0.7 * (0.25 * p[2]).sin())
+        .sin()
+        .abs();
     let vessel = v1 < 0.12 || v2 < 0.1;
     let tint = if vessel { [0.5, 0.28, 0.36] } else { [1.0; 3] };
     std::array::from_fn(|c| base[c] * slow * tint[c])
@@ -168,11 +173,7 @@ impl World {
                 let eye = [2.0 * phi.cos(), 2.0 * phi.sin(), 50.0 - 38.0 * t];
                 let tilt = (8.0 + 22.0 * ((1.7 * i as f64).sin().abs())).to_radians();
                 let dir = phi + 2.0;
-                let fwd = [
-                    tilt.sin() * dir.cos(),
-                    tilt.sin() * dir.sin(),
-                    -tilt.cos(),
-                ];
+                let fwd = [tilt.sin() * dir.cos(), tilt.sin() * dir.sin(), -tilt.cos()];
                 look(eye, fwd, [0.0, 1.0, 0.0])
             })
             .collect()
@@ -193,7 +194,7 @@ impl World {
                 }
                 let z = gs.z[i] as f64;
                 let gamma = (gs.gamma[i] as f64).max(0.0);
-                let cone = (self.rays_ss.dirs[i][2] as f64).max(0.0).powi(2);
+                let cone = (self.rays_ss.dirs[i][2] as f64).max(0.0);
                 let light = 300.0 * cone / (z * z);
                 let (diff, spec) = brdf_cos(gamma);
                 let a = albedo(gs.point[i].map(f64::from));
