@@ -5,7 +5,6 @@ use crate::io::atomic::write_atomic;
 use crate::io::frames::Frame;
 use crate::mesh::TriMesh;
 use crate::{Error, Result};
-use std::io::Write;
 use std::path::Path;
 
 /// Binary little-endian PLY: vertex `x y z` (float, world mm), `nx ny nz` (unit, into the
