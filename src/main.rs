@@ -7,6 +7,7 @@ use bronchosim::workflow::build::{build_model, BuildOptions};
 use bronchosim::workflow::segment::{
     default_segment_out, parse_point, segment_command, SegmentCommandOptions,
 };
+use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -91,6 +92,42 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+    /// Write a synthetic case (CT, frames, poses, camera) with its truth in CASE/truth/.
+    Phantom {
+        /// The case folder to create.
+        #[arg(long)]
+        out: PathBuf,
+        /// Number of video frames.
+        #[arg(long, default_value_t = 80)]
+        frames: usize,
+        /// Frame size in pixels, WIDTHxHEIGHT.
+        #[arg(long, default_value = "320x320", value_parser = parse_size)]
+        size: (u32, u32),
+        /// Master seed (same seed, identical files).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Take the airway from this binary mask (NIfTI) instead of the built-in tree.
+        #[arg(long)]
+        anatomy: Option<PathBuf>,
+        /// Average blocks of N³ mask voxels first (with --anatomy; faster, coarser).
+        #[arg(long, default_value_t = 1)]
+        downsample: usize,
+        /// Sub-samples per pixel along each axis (antialiasing).
+        #[arg(long, default_value_t = 1)]
+        supersample: u32,
+        /// Replace CASE if it exists.
+        #[arg(long)]
+        force: bool,
+    },
+}
+
+/// Parse "WxH" into (width, height).
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("size {s:?} is not WIDTHxHEIGHT"))?;
+    let p = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("size {s:?}: {e}"));
+    Ok((p(w)?, p(h)?))
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
@@ -178,6 +215,50 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 if !cli.quiet {
                     eprintln!("warning: {w}");
                 }
+            }
+            Ok(())
+        }
+        Command::Phantom {
+            out,
+            frames,
+            size,
+            seed,
+            anatomy,
+            downsample,
+            supersample,
+            force,
+        } => {
+            let mut opts = PhantomOptions {
+                frames,
+                width: size.0,
+                height: size.1,
+                seed,
+                anatomy,
+                supersample,
+                force,
+                ..Default::default()
+            };
+            opts.mask.downsample = downsample;
+            let t = std::time::Instant::now();
+            let s = write_phantom_case(&out, &opts)
+                .with_context(|| format!("phantom {}", out.display()))?;
+            if !cli.quiet {
+                println!(
+                    "wrote {}: CT {:?}, mesh {} triangles, {} frames, {} truth views in {:.1} s \
+                     (CT {:.1}, mesh {:.1}, path {:.1}, frames {:.1}, views {:.1}, CT file {:.1})",
+                    out.display(),
+                    s.ct_dims,
+                    s.mesh_triangles,
+                    s.frames,
+                    s.views,
+                    t.elapsed().as_secs_f64(),
+                    s.seconds[0],
+                    s.seconds[1],
+                    s.seconds[2],
+                    s.seconds[3],
+                    s.seconds[4],
+                    s.seconds[5]
+                );
             }
             Ok(())
         }

@@ -230,7 +230,7 @@ fn block_average(m: &Volume<u8>, f: usize) -> Volume<f32> {
 }
 
 /// Separable Gaussian blur in place, `sigma` in voxels along every axis, edges clamped.
-fn gaussian_blur(v: &mut Volume<f32>, sigma: f64) {
+pub(crate) fn gaussian_blur(v: &mut Volume<f32>, sigma: f64) {
     let r = (3.0 * sigma).ceil() as i64;
     let mut kern: Vec<f32> = (-r..=r)
         .map(|x| (-(x * x) as f64 / (2.0 * sigma * sigma)).exp() as f32)
