@@ -3,11 +3,11 @@
 use anyhow::Context;
 use bronchosim::inspect::{inspect_case, InspectOptions};
 use bronchosim::math::Point3;
+use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::workflow::build::{build_model, BuildOptions};
 use bronchosim::workflow::segment::{
     default_segment_out, parse_point, segment_command, SegmentCommandOptions,
 };
-use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -126,7 +126,11 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("size {s:?} is not WIDTHxHEIGHT"))?;
-    let p = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("size {s:?}: {e}"));
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|e| format!("size {s:?}: {e}"))
+    };
     Ok((p(w)?, p(h)?))
 }
 
@@ -146,11 +150,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             };
             opts.atlas.texel_mm = texel_mm;
             opts.fusion.method = match fusion.as_str() {
-                "max" => bronchosim::texture::fusion::FusionMethod::MaxWeightSmoothed { sigma_texels: 2.0 },
+                "max" => bronchosim::texture::fusion::FusionMethod::MaxWeightSmoothed {
+                    sigma_texels: 2.0,
+                },
                 "average" => bronchosim::texture::fusion::FusionMethod::WeightedAverage,
                 other => anyhow::bail!("--fusion {other}: expected max or average"),
             };
-            let m = build_model(&case, &out, &opts).with_context(|| format!("build {}", case.display()))?;
+            let m = build_model(&case, &out, &opts)
+                .with_context(|| format!("build {}", case.display()))?;
             if !cli.quiet {
                 println!(
                     "built {} from {} frames in {:.1} s: {} triangles, atlas {}x{} ({} of {} texels seen), mean R² of Psi {:.3}",

@@ -3,7 +3,8 @@
 //! Every writer is atomic: it writes a temporary file in the target's folder and renames it into
 //! place, so an interrupted run never leaves a truncated mesh behind.
 
-use std::io::{BufRead, BufReader, BufWriter, Read, Write};
+use crate::io::atomic::write_atomic;
+use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 
 use gltf_json as json;
@@ -12,26 +13,6 @@ use json::validation::Checked::Valid;
 use crate::math::Point3;
 use crate::mesh::TriMesh;
 use crate::{Error, Result};
-
-/// Write `path` atomically: `fill` writes the content into a temporary file beside it.
-fn atomic_write(
-    path: &Path,
-    fill: impl FnOnce(&mut BufWriter<&mut std::fs::File>) -> std::io::Result<()>,
-) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| Error::io(path, e))?;
-    {
-        let mut w = BufWriter::new(tmp.as_file_mut());
-        fill(&mut w).map_err(|e| Error::io(path, e))?;
-        w.flush().map_err(|e| Error::io(path, e))?;
-    }
-    tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
-    tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
-    Ok(())
-}
 
 /// Fail when a triangle refers past the vertex list or the UVs do not match the vertices.
 fn check_mesh(path: &Path, mesh: &TriMesh, uvs: Option<&[[f32; 2]]>) -> Result<()> {
@@ -63,7 +44,7 @@ fn check_mesh(path: &Path, mesh: &TriMesh, uvs: Option<&[[f32; 2]]>) -> Result<(
 pub fn write_ply(path: &Path, mesh: &TriMesh) -> Result<()> {
     check_mesh(path, mesh, None)?;
     let normals = mesh.vertex_normals();
-    atomic_write(path, |w| {
+    write_atomic(path, |w| {
         write!(
             w,
             "ply\nformat binary_little_endian 1.0\ncomment bronchosim lumen mesh, world mm (RAS+)\n\
@@ -197,7 +178,7 @@ pub fn read_ply(path: &Path) -> Result<TriMesh> {
 pub fn write_obj(path: &Path, mesh: &TriMesh, uvs: Option<&[[f32; 2]]>) -> Result<()> {
     check_mesh(path, mesh, uvs)?;
     let normals = mesh.vertex_normals();
-    atomic_write(path, |w| {
+    write_atomic(path, |w| {
         writeln!(
             w,
             "# bronchosim lumen mesh, world mm (RAS+), normals face into the lumen"
@@ -423,7 +404,7 @@ pub fn write_glb(path: &Path, mesh: &TriMesh, texture: Option<(&[[f32; 2]], &[u8
             path.display()
         )));
     }
-    atomic_write(path, |w| {
+    write_atomic(path, |w| {
         w.write_all(b"glTF")?;
         w.write_all(&2u32.to_le_bytes())?;
         w.write_all(&(total as u32).to_le_bytes())?;

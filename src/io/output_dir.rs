@@ -62,6 +62,12 @@ impl OutputDir {
     /// Move the finished folder into place (replacing an existing one when forced).
     pub fn commit(mut self) -> Result<PathBuf> {
         let staging = self.staging.take().expect("committed once").keep();
+        // tempfile creates 0700 folders; a result folder is ordinary (0755).
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let _ = std::fs::set_permissions(&staging, std::fs::Permissions::from_mode(0o755));
+        }
         if self.target.exists() {
             if !self.force {
                 return Err(Error::invalid(

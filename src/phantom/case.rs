@@ -216,8 +216,8 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
             let t1 = Instant::now();
             let mesh = mask_truth_mesh(&ph.truth_mask, opts.max_triangles)?;
             sm.seconds[1] = t1.elapsed().as_secs_f64();
-            let cl =
-                mask_centreline(&ph.truth_mask).map_err(|e| Error::invalid(mask_path, e.to_string()))?;
+            let cl = mask_centreline(&ph.truth_mask)
+                .map_err(|e| Error::invalid(mask_path, e.to_string()))?;
             let sdf: Volume<f32> = cl.sdf;
             (
                 ph.ct,
@@ -290,7 +290,8 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     write_albedo_ply(&truth.join("albedo_vertices.ply"), &mesh, &vertex_albedo)?;
     let reference_gain = gains[0].gain;
     let gfile = GainsFile {
-        description: "linear frame = clip(gain * radiance + noise); radiance per render.rs with the \
+        description:
+            "linear frame = clip(gain * radiance + noise); radiance per render.rs with the \
                       light below; truth views use reference_gain (frame 0) and no noise",
         light: &opts.light,
         cone_exponent: opts.light.cone_exponent(),
@@ -304,7 +305,17 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     let vrays = SubpixelRays::new(&pinhole, opts.supersample);
     let mut ventries = Vec::new();
     for (k, v) in views.iter().enumerate() {
-        write_view(&truth, k, v, &scene, &pinhole, &vrays, &albedo, opts, reference_gain)?;
+        write_view(
+            &truth,
+            k,
+            v,
+            &scene,
+            &pinhole,
+            &vrays,
+            &albedo,
+            opts,
+            reference_gain,
+        )?;
         ventries.push(PoseEntry {
             frame: FrameRef::Image(vdir.join(format!("{k:06}.png"))),
             camera_to_world: *v,
@@ -365,18 +376,19 @@ fn write_view(
     write_linear16_png(&base.join(format!("{k:06}_linear.png")), &img)?;
     let gb = cast_frame(scene, pinhole, pose);
     let (w, h) = (pinhole.width, pinhole.height);
-    let mask: Vec<u8> = (0..gb.tri.len()).map(|i| if gb.hit(i) { 255 } else { 0 }).collect();
-    let depth: Vec<u16> = gb
-        .z
-        .iter()
-        .map(|&z| {
-            if z.is_finite() {
-                (z as f64 * 100.0).round().clamp(1.0, 65535.0) as u16
-            } else {
-                0
-            }
-        })
+    let mask: Vec<u8> = (0..gb.tri.len())
+        .map(|i| if gb.hit(i) { 255 } else { 0 })
         .collect();
+    let depth: Vec<u16> =
+        gb.z.iter()
+            .map(|&z| {
+                if z.is_finite() {
+                    (z as f64 * 100.0).round().clamp(1.0, 65535.0) as u16
+                } else {
+                    0
+                }
+            })
+            .collect();
     let mut alb = Frame::new(w, h);
     for i in 0..gb.tri.len() {
         if gb.hit(i) {

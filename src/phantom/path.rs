@@ -196,7 +196,11 @@ impl Wobble {
         Wobble { waves }
     }
     fn at(&self, s: f64) -> f64 {
-        self.waves.iter().map(|(k, ph)| (k * s + ph).sin()).sum::<f64>() / 3f64.sqrt()
+        self.waves
+            .iter()
+            .map(|(k, ph)| (k * s + ph).sin())
+            .sum::<f64>()
+            / 3f64.sqrt()
     }
 }
 
@@ -374,7 +378,11 @@ mod tests {
         let mut max_angle: f64 = 0.0;
         for (i, m) in poses.iter().enumerate() {
             let c = Point3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]);
-            assert!(tree.lumen_sdf(c) <= -1.5, "pose {i}: sdf {}", tree.lumen_sdf(c));
+            assert!(
+                tree.lumen_sdf(c) <= -1.5,
+                "pose {i}: sdf {}",
+                tree.lumen_sdf(c)
+            );
             // Rotation is orthonormal with determinant +1.
             let r = m.fixed_view::<3, 3>(0, 0).into_owned();
             assert!((r.transpose() * r - crate::math::Matrix3::identity()).norm() < 1e-9);
@@ -390,7 +398,10 @@ mod tests {
         // Starts high in the trachea, ends below the carina on the right (+x).
         let first = poses[0].fixed_view::<3, 1>(0, 3).into_owned();
         let last = poses[79].fixed_view::<3, 1>(0, 3).into_owned();
-        assert!(first.z > 70.0 && last.z < -10.0 && last.x > 5.0, "{first:?} {last:?}");
+        assert!(
+            first.z > 70.0 && last.z < -10.0 && last.x > 5.0,
+            "{first:?} {last:?}"
+        );
         // The wobble moves off the smoothed centreline by up to a few mm, not more.
         let mut max_off: f64 = 0.0;
         for m in &poses {
@@ -402,7 +413,10 @@ mod tests {
                 .fold(f64::INFINITY, f64::min);
             max_off = max_off.max(d);
         }
-        assert!(max_off > 0.3 && max_off < 4.0, "largest offset {max_off} mm");
+        assert!(
+            max_off > 0.3 && max_off < 4.0,
+            "largest offset {max_off} mm"
+        );
         let views = novel_views(&path, &sdf, 8, &opts).unwrap();
         for v in &views {
             let c = Point3::new(v[(0, 3)], v[(1, 3)], v[(2, 3)]);

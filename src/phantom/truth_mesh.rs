@@ -145,7 +145,11 @@ mod tests {
         let v = sample_tree_sdf(&tree, 0.6, top).unwrap();
         let mut checked = 0;
         for q in (0..v.len()).step_by(97) {
-            let ijk = [q % v.dims[0], (q / v.dims[0]) % v.dims[1], q / (v.dims[0] * v.dims[1])];
+            let ijk = [
+                q % v.dims[0],
+                (q / v.dims[0]) % v.dims[1],
+                q / (v.dims[0] * v.dims[1]),
+            ];
             let p = v.index_to_world(Point3::new(ijk[0] as f64, ijk[1] as f64, ijk[2] as f64));
             let d = tree.lumen_sdf(p) as f32;
             let s = v.data[q];

@@ -201,7 +201,11 @@ pub fn r_squared(s: &SampleSet, m: &PsiModel) -> [f64; 3] {
             ss_res += (v - p) * (v - p);
             ss_tot += (v - mean) * (v - mean);
         }
-        *o = if ss_tot > 0.0 { 1.0 - ss_res / ss_tot } else { 0.0 };
+        *o = if ss_tot > 0.0 {
+            1.0 - ss_res / ss_tot
+        } else {
+            0.0
+        };
     }
     out
 }
@@ -243,9 +247,9 @@ impl FrameStream for CaseFrames<'_> {
         }
         let src = self.source.as_mut().expect("opened above");
         while self.next <= index {
-            let f = src
-                .next()
-                .ok_or_else(|| Error::Other(format!("frame {index} missing from the frame source")))??;
+            let f = src.next().ok_or_else(|| {
+                Error::Other(format!("frame {index} missing from the frame source"))
+            })??;
             if self.next == index {
                 self.frame = f;
             }
@@ -298,6 +302,9 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     let mut report_frames = Vec::new();
     let report_every = (n / 3).max(1);
     let progress = Progress::new("fit Psi", n as u64, opts.quiet);
+    // Mean colour of the pixels that obey the model: Psi is fitted per channel, so the de-lit
+    // texture has each channel's mean divided out; this puts the colour back (one scale per channel).
+    let mut pixel_sum = [0f64; 3];
     for (i, frame) in case.frame_source()?.enumerate() {
         let frame = frame?;
         let pose = &case.poses[i].camera_to_world;
@@ -305,6 +312,9 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         let (samples, model, mut ff) = fit_frame(&frame, &g, pose, opts)
             .map_err(|e| Error::Other(format!("frame {i} ({}): {e}", frame_name(&case, i))))?;
         ff.frame = i;
+        for (ch, sum) in pixel_sum.iter_mut().enumerate() {
+            *sum += samples.rgb[ch].iter().map(|&v| v as f64).sum::<f64>();
+        }
         if i % report_every == 0 && report_frames.len() < 3 {
             report_frames.push(ReportFrame {
                 index: i,
@@ -337,7 +347,8 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     };
     let fused = fuse(&texels, &mut stream, &opts.fusion)?;
     stream.progress.finish();
-    let filled = fused.filled(&texels)?;
+    let mut filled = fused.filled(&texels)?;
+    colour_balance(&mut filled, &fused.covered, pixel_sum);
     timings.fusion = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -381,7 +392,8 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         &ReportInputs {
             manifest: &manifest,
             frames: &report_frames,
-            albedo_png: &std::fs::read(out_dir.join("albedo.png")).map_err(|e| Error::io(out_dir.join("albedo.png"), e))?,
+            albedo_png: &std::fs::read(out_dir.join("albedo.png"))
+                .map_err(|e| Error::io(out_dir.join("albedo.png"), e))?,
         },
     )?;
     manifest.timings.write = t.elapsed().as_secs_f64();
@@ -389,6 +401,38 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     write_json(&out_dir.join("model.json"), &manifest)?;
     out_dir.commit()?;
     Ok(manifest)
+}
+
+/// Scale each channel of the fused texture so its mean over the covered texels has the
+/// chromaticity of the mean observed pixel (the per-channel Psi divided it out).
+fn colour_balance(rgb: &mut [f32], covered: &[bool], pixel_sum: [f64; 3]) {
+    let mut tex_sum = [0f64; 3];
+    for (i, _) in covered.iter().enumerate().filter(|(_, &c)| c) {
+        for ch in 0..3 {
+            tex_sum[ch] += rgb[3 * i + ch] as f64;
+        }
+    }
+    let pix_mean = (pixel_sum[0] + pixel_sum[1] + pixel_sum[2]) / 3.0;
+    let tex_mean = (tex_sum[0] + tex_sum[1] + tex_sum[2]) / 3.0;
+    if !(pix_mean > 0.0 && tex_mean > 0.0) {
+        return;
+    }
+    let k: Vec<f32> = (0..3)
+        .map(|ch| {
+            let want = pixel_sum[ch] / pix_mean;
+            let have = tex_sum[ch] / tex_mean;
+            if have > 0.0 {
+                (want / have) as f32
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    for px in rgb.chunks_exact_mut(3) {
+        for ch in 0..3 {
+            px[ch] *= k[ch];
+        }
+    }
 }
 
 /// A frame's file name (PNG) or index (video), for messages.

@@ -87,7 +87,9 @@ fn shading_and_texture(f: &ReportFrame) -> (Frame, Frame) {
         let k = (tex_vals.len() - 1) * 99 / 100;
         let p99 = *tex_vals.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
         if p99 > 0.0 {
-            tex.rgb.iter_mut().for_each(|v| *v = (*v * 0.9 / p99).min(1.0));
+            tex.rgb
+                .iter_mut()
+                .for_each(|v| *v = (*v * 0.9 / p99).min(1.0));
         }
     }
     (shade, tex)
@@ -117,7 +119,11 @@ fn svg_series(title: &str, series: &[(&str, &str, Vec<f64>)], y_range: (f64, f64
         h - 6.0
     );
     for (k, (name, colour, vals)) in series.iter().enumerate() {
-        let pts: Vec<String> = vals.iter().enumerate().map(|(i, &v)| format!("{:.1},{:.1}", x(i), y(v))).collect();
+        let pts: Vec<String> = vals
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| format!("{:.1},{:.1}", x(i), y(v)))
+            .collect();
         let _ = write!(
             s,
             "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.5\" points=\"{}\"/>\
@@ -165,7 +171,11 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
     let r2 = |c: usize| m.fit_quality.iter().map(|f| f.r2[c]).collect::<Vec<_>>();
     html.push_str(&svg_series(
         &format!("R² of Psi against the pixels (mean {:.3})", m.mean_r2),
-        &[("R", "#c33", r2(0)), ("G", "#3a3", r2(1)), ("B", "#33c", r2(2))],
+        &[
+            ("R", "#c33", r2(0)),
+            ("G", "#3a3", r2(1)),
+            ("B", "#33c", r2(2)),
+        ],
         (0.0, 1.0),
     ));
     // Fig. 2 and Fig. 3 for a few frames.
@@ -177,7 +187,11 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
         let mut zs: Vec<f32> = f.samples.z.clone();
         let k = zs.len() / 2;
         let zmed = *zs.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1 as f64;
-        let slices = [(zmed - 4.0, zmed - 2.0), (zmed - 1.0, zmed + 1.0), (zmed + 2.0, zmed + 4.0)];
+        let slices = [
+            (zmed - 4.0, zmed - 2.0),
+            (zmed - 1.0, zmed + 1.0),
+            (zmed + 2.0, zmed + 4.0),
+        ];
         let fit = tmp.path().join(format!("fit{}.png", f.index));
         plot_psi_slices(&f.samples, &f.psi, &slices, &fit)?;
         let read = |p: &Path| std::fs::read(p).map_err(|e| Error::io(p, e));
