@@ -1,0 +1,83 @@
+//! The whole pipeline from the command line: `phantom` writes a small case, `build` turns it
+//! into a model folder; the folder holds what DESIGN.md promises and its numbers are sane.
+
+use std::path::Path;
+use std::process::Command;
+
+fn run(args: &[&str], cwd: &Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_bronchosim"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn phantom_then_build_writes_the_model_folder() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let o = run(&["phantom", "--out", "case", "--frames", "8", "--size", "128x128", "--quiet"], dir);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = run(&["build", "case", "--out", "model", "--quiet"], dir);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let model = dir.join("model");
+    for f in [
+        "model.json",
+        "airway.glb",
+        "albedo.png",
+        "coverage.png",
+        "shading.json",
+        "segmentation.nii.gz",
+        "report.html",
+    ] {
+        assert!(model.join(f).is_file(), "{f} missing");
+    }
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(model.join("model.json")).unwrap()).unwrap();
+    assert_eq!(m["format_version"], 1);
+    assert_eq!(m["counts"]["frames"], 8);
+    let covered = m["counts"]["covered_texels"].as_u64().unwrap();
+    let chart = m["counts"]["chart_texels"].as_u64().unwrap();
+    assert!(covered > 1000 && covered <= chart, "{covered} of {chart}");
+    // Psi explains most of the shading of physically based frames that are not Psi: per-frame
+    // R² 0.7–0.85 in red, lower in green and blue whose dark vessels are texture, not shading.
+    let r2 = m["mean_r2"].as_f64().unwrap();
+    assert!(r2 > 0.45, "mean R² {r2}");
+    assert!(m["atlas_mean_l2_stretch"].as_f64().unwrap() < 1.1);
+    let total = m["timings"]["total"].as_f64().unwrap();
+    assert!(total > 0.0);
+
+    // shading.json: one Psi per frame, at that frame's pose.
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(model.join("shading.json")).unwrap()).unwrap();
+    assert_eq!(s["model"], "paper");
+    let vps = s["viewpoints"].as_array().unwrap();
+    assert_eq!(vps.len(), 8);
+    let poses: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("case/poses.json")).unwrap()).unwrap();
+    for (vp, pose) in vps.iter().zip(poses["frames"].as_array().unwrap()) {
+        let a: Vec<f64> = vp["camera_to_world"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let b: Vec<f64> = pose["camera_to_world"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-9));
+        assert!(vp["z_min"].as_f64().unwrap() < vp["z_max"].as_f64().unwrap());
+    }
+
+    // airway.glb: a binary glTF with the albedo embedded.
+    let glb = std::fs::read(model.join("airway.glb")).unwrap();
+    assert_eq!(&glb[0..4], b"glTF");
+    assert_eq!(u32::from_le_bytes(glb[4..8].try_into().unwrap()), 2);
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let json: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    assert_eq!(json["images"][0]["mimeType"], "image/png");
+    assert!(json["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"].is_number());
+
+    // The report embeds the figures (Fig. 2 a/b and Fig. 3 for three frames, and the atlas).
+    let html = std::fs::read_to_string(model.join("report.html")).unwrap();
+    assert!(html.matches("<img").count() >= 3 * 5 + 1, "report has too few figures");
+    assert!(html.contains("data:image/png;base64,"));
+
+    // An existing model is not replaced without --force.
+    let again = run(&["build", "case", "--out", "model", "--quiet"], dir);
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
+}
