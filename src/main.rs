@@ -65,7 +65,11 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("size {s:?} is not WIDTHxHEIGHT"))?;
-    let p = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("size {s:?}: {e}"));
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|e| format!("size {s:?}: {e}"))
+    };
     Ok((p(w)?, p(h)?))
 }
 

@@ -7,7 +7,6 @@ use bronchosim::io::frames::read_png;
 use bronchosim::io::mesh_export::read_ply;
 use bronchosim::io::nifti::read_nifti;
 use bronchosim::io::poses::{read_poses, FrameRef};
-use bronchosim::math::Point3;
 use bronchosim::phantom::{
     write_phantom_case, AirwayTree, CtPhantomOptions, PhantomOptions, TreeOptions,
 };
@@ -54,7 +53,10 @@ fn read_gray(path: &Path) -> (Vec<u16>, u32, u32) {
             .chunks_exact(2)
             .map(|c| u16::from_be_bytes([c[0], c[1]]))
             .collect(),
-        _ => buf[..info.buffer_size()].iter().map(|&b| b as u16).collect(),
+        _ => buf[..info.buffer_size()]
+            .iter()
+            .map(|&b| b as u16)
+            .collect(),
     };
     (v, info.width, info.height)
 }
@@ -165,7 +167,10 @@ fn phantom_case_is_deterministic_in_air_well_exposed_and_consistent() {
             .iter()
             .map(|p| (p.centre() - v.centre()).norm())
             .fold(f64::INFINITY, f64::min);
-        assert!(nearest > 0.3, "view {k} is {nearest} mm from a training pose");
+        assert!(
+            nearest > 0.3,
+            "view {k} is {nearest} mm from a training pose"
+        );
         let gb = cast_frame(&scene, &cam, &v.camera_to_world);
         let (mask, w, h) = read_gray(&truth.join(format!("views/{k:06}_mask.png")));
         let (depth, _, _) = read_gray(&truth.join(format!("views/{k:06}_depth.png")));
@@ -176,7 +181,11 @@ fn phantom_case_is_deterministic_in_air_well_exposed_and_consistent() {
             if gb.hit(i) {
                 hits += 1;
                 let z = depth[i] as f64 / 100.0;
-                assert!((z - gb.z[i] as f64).abs() <= 0.006, "view {k} pixel {i}: {z} vs {}", gb.z[i]);
+                assert!(
+                    (z - gb.z[i] as f64).abs() <= 0.006,
+                    "view {k} pixel {i}: {z} vs {}",
+                    gb.z[i]
+                );
             } else {
                 assert_eq!(depth[i], 0);
             }
@@ -200,11 +209,8 @@ fn phantom_case_is_deterministic_in_air_well_exposed_and_consistent() {
     );
 }
 
-/// A real ATM'22 tree (downsampled twice): the camera stays in the lumen and the case is
-/// valid. Slow in debug builds (reads a 512²·388 mask), hence ignored by default:
-/// `cargo test --release --test phantom_case -- --ignored`.
+/// A real ATM'22 tree (downsampled twice, ~4 s): the camera stays in air and descends.
 #[test]
-#[ignore]
 fn phantom_from_a_real_mask() {
     let mask = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../shared/data/atm22-airways/ATM_305_airway_mask.nii.gz");

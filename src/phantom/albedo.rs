@@ -194,7 +194,9 @@ fn cell_border_distance(p: &[f64; 3], cell: f64, seed: u64) -> f64 {
     }
     let (a, b) = (best[0].1, best[1].1);
     let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-    let len = (ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2]).sqrt().max(1e-9);
+    let len = (ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2])
+        .sqrt()
+        .max(1e-9);
     // (|p-b|² - |p-a|²) / (2 |b-a|) is the distance to the bisector plane.
     (best[1].0 - best[0].0) / (2.0 * len) * cell
 }
@@ -243,7 +245,10 @@ mod tests {
         let (fd, fp) = (dark as f64 / n as f64, pale as f64 / n as f64);
         assert!(fd > 0.03 && fd < 0.30, "vessel fraction {fd}");
         assert!(fp > 0.01 && fp < 0.25, "pale fraction {fp}");
-        assert!(differ > n * 9 / 10, "another seed changes the albedo: {differ}");
+        assert!(
+            differ > n * 9 / 10,
+            "another seed changes the albedo: {differ}"
+        );
     }
 
     #[test]

@@ -183,50 +183,49 @@ pub fn write_phantom_case(out: &Path, opts: &PhantomOptions) -> Result<PhantomSu
     Ok(summary)
 }
 
+/// Signed distance (mm) to the true lumen wall, negative inside.
+type SdfFn = Box<dyn Fn(&Point3<f64>) -> f64 + Sync>;
+
 fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     let mut sm = PhantomSummary::default();
     let seed = opts.seed;
     let t = Instant::now();
     // The CT, the truth mesh and the signed distance the path is checked with.
-    let (ct, mesh, sdf_fn, centreline): (
-        Volume<f32>,
-        TriMesh,
-        Box<dyn Fn(&Point3<f64>) -> f64 + Sync>,
-        Vec<Point3<f64>>,
-    ) = match &opts.anatomy {
-        None => {
-            let mut co = opts.ct.clone();
-            co.tree.seed = seed;
-            co.seed = seed.wrapping_mul(31).wrapping_add(7);
-            let ph = make_ct_phantom(&co)?;
-            sm.seconds[0] = t.elapsed().as_secs_f64();
-            let t1 = Instant::now();
-            let top = ph.tree.branches[0].control[0].z - 5.0;
-            let mesh = tree_truth_mesh(&ph.tree, opts.truth_grid_mm, top, opts.max_triangles)?;
-            sm.seconds[1] = t1.elapsed().as_secs_f64();
-            let line = tree_centreline(&ph.tree);
-            let tree = ph.tree;
-            (ph.ct, mesh, Box::new(move |p| tree.lumen_sdf(*p)), line)
-        }
-        Some(mask_path) => {
-            let mut mo = opts.mask.clone();
-            mo.seed = seed.wrapping_mul(31).wrapping_add(11);
-            let ph = ct_from_mask_file(mask_path, &mo)?;
-            sm.seconds[0] = t.elapsed().as_secs_f64();
-            let t1 = Instant::now();
-            let mesh = mask_truth_mesh(&ph.truth_mask, opts.max_triangles)?;
-            sm.seconds[1] = t1.elapsed().as_secs_f64();
-            let cl =
-                mask_centreline(&ph.truth_mask).map_err(|e| Error::invalid(mask_path, e.to_string()))?;
-            let sdf: Volume<f32> = cl.sdf;
-            (
-                ph.ct,
-                mesh,
-                Box::new(move |p| sdf.sample_world(*p).map_or(1.0, |v| v as f64)),
-                cl.points,
-            )
-        }
-    };
+    let (ct, mesh, sdf_fn, centreline): (Volume<f32>, TriMesh, SdfFn, Vec<Point3<f64>>) =
+        match &opts.anatomy {
+            None => {
+                let mut co = opts.ct.clone();
+                co.tree.seed = seed;
+                co.seed = seed.wrapping_mul(31).wrapping_add(7);
+                let ph = make_ct_phantom(&co)?;
+                sm.seconds[0] = t.elapsed().as_secs_f64();
+                let t1 = Instant::now();
+                let top = ph.tree.branches[0].control[0].z - 5.0;
+                let mesh = tree_truth_mesh(&ph.tree, opts.truth_grid_mm, top, opts.max_triangles)?;
+                sm.seconds[1] = t1.elapsed().as_secs_f64();
+                let line = tree_centreline(&ph.tree);
+                let tree = ph.tree;
+                (ph.ct, mesh, Box::new(move |p| tree.lumen_sdf(*p)), line)
+            }
+            Some(mask_path) => {
+                let mut mo = opts.mask.clone();
+                mo.seed = seed.wrapping_mul(31).wrapping_add(11);
+                let ph = ct_from_mask_file(mask_path, &mo)?;
+                sm.seconds[0] = t.elapsed().as_secs_f64();
+                let t1 = Instant::now();
+                let mesh = mask_truth_mesh(&ph.truth_mask, opts.max_triangles)?;
+                sm.seconds[1] = t1.elapsed().as_secs_f64();
+                let cl = mask_centreline(&ph.truth_mask)
+                    .map_err(|e| Error::invalid(mask_path, e.to_string()))?;
+                let sdf: Volume<f32> = cl.sdf;
+                (
+                    ph.ct,
+                    mesh,
+                    Box::new(move |p| sdf.sample_world(*p).map_or(1.0, |v| v as f64)),
+                    cl.points,
+                )
+            }
+        };
     sm.ct_dims = ct.dims;
     sm.mesh_vertices = mesh.positions.len();
     sm.mesh_triangles = mesh.triangles.len();
@@ -290,7 +289,8 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     write_albedo_ply(&truth.join("albedo_vertices.ply"), &mesh, &vertex_albedo)?;
     let reference_gain = gains[0].gain;
     let gfile = GainsFile {
-        description: "linear frame = clip(gain * radiance + noise); radiance per render.rs with the \
+        description:
+            "linear frame = clip(gain * radiance + noise); radiance per render.rs with the \
                       light below; truth views use reference_gain (frame 0) and no noise",
         light: &opts.light,
         cone_exponent: opts.light.cone_exponent(),
@@ -304,7 +304,17 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     let vrays = SubpixelRays::new(&pinhole, opts.supersample);
     let mut ventries = Vec::new();
     for (k, v) in views.iter().enumerate() {
-        write_view(&truth, k, v, &scene, &pinhole, &vrays, &albedo, opts, reference_gain)?;
+        write_view(
+            &truth,
+            k,
+            v,
+            &scene,
+            &pinhole,
+            &vrays,
+            &albedo,
+            opts,
+            reference_gain,
+        )?;
         ventries.push(PoseEntry {
             frame: FrameRef::Image(vdir.join(format!("{k:06}.png"))),
             camera_to_world: *v,
@@ -365,18 +375,19 @@ fn write_view(
     write_linear16_png(&base.join(format!("{k:06}_linear.png")), &img)?;
     let gb = cast_frame(scene, pinhole, pose);
     let (w, h) = (pinhole.width, pinhole.height);
-    let mask: Vec<u8> = (0..gb.tri.len()).map(|i| if gb.hit(i) { 255 } else { 0 }).collect();
-    let depth: Vec<u16> = gb
-        .z
-        .iter()
-        .map(|&z| {
-            if z.is_finite() {
-                (z as f64 * 100.0).round().clamp(1.0, 65535.0) as u16
-            } else {
-                0
-            }
-        })
+    let mask: Vec<u8> = (0..gb.tri.len())
+        .map(|i| if gb.hit(i) { 255 } else { 0 })
         .collect();
+    let depth: Vec<u16> =
+        gb.z.iter()
+            .map(|&z| {
+                if z.is_finite() {
+                    (z as f64 * 100.0).round().clamp(1.0, 65535.0) as u16
+                } else {
+                    0
+                }
+            })
+            .collect();
     let mut alb = Frame::new(w, h);
     for i in 0..gb.tri.len() {
         if gb.hit(i) {

@@ -21,7 +21,8 @@ use std::collections::BinaryHeap;
 /// The centreline through a mask and the signed distance it was found with.
 #[derive(Clone, Debug)]
 pub struct MaskCentreline {
-    /// Voxel-centre polyline from the trachea's top to the target (world mm), unsmoothed.
+    /// Voxel-centre polyline from 15 mm below the trachea's top to the target (world mm),
+    /// unsmoothed.
     pub points: Vec<Point3<f64>>,
     /// Signed distance to the lumen wall (mm, negative inside), on the mask's grid.
     pub sdf: Volume<f32>,
@@ -126,7 +127,11 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
             "mask centreline: the mask has no lumen voxel".into(),
         ));
     }
-    let seed = [thick % dims[0], (thick / dims[0]) % dims[1], thick / (dims[0] * dims[1])];
+    let seed = [
+        thick % dims[0],
+        (thick / dims[0]) % dims[1],
+        thick / (dims[0] * dims[1]),
+    ];
     let comp = component_of(mask, seed);
     let dt_out: Vec<f32> = distance_transform_sq(dims, sp, |i| comp.data[i] != 0)
         .into_iter()
@@ -158,7 +163,10 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
             + a[(2, 3)]
     };
     let members: Vec<usize> = (0..n).filter(|&i| comp.data[i] != 0).collect();
-    let ztop = members.iter().map(|&i| wz(i)).fold(f64::NEG_INFINITY, f64::max);
+    let ztop = members
+        .iter()
+        .map(|&i| wz(i))
+        .fold(f64::NEG_INFINITY, f64::max);
     let start = *members
         .iter()
         .filter(|&&i| wz(i) > ztop - 3.0)
@@ -180,7 +188,11 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
         let mut members = Vec::new();
         while idx < order.len() && (geo[order[idx] as usize] / shell).floor() == s0 {
             let v = order[idx] as usize;
-            label[v] = if v == start { 1 } else { label[pred[v] as usize] };
+            label[v] = if v == start {
+                1
+            } else {
+                label[pred[v] as usize]
+            };
             if label[v] == 1 {
                 members.push(v);
             }
@@ -206,7 +218,9 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
                 0 => big
                     .iter()
                     .min_by(|p, q| mean(p, &|v| world(v).x).total_cmp(&mean(q, &|v| world(v).x))),
-                1 => big.iter().min_by(|p, q| mean(p, &wz).total_cmp(&mean(q, &wz))),
+                1 => big
+                    .iter()
+                    .min_by(|p, q| mean(p, &wz).total_cmp(&mean(q, &wz))),
                 _ => big.iter().max_by(|p, q| {
                     mean(p, &|v| dt_in[v] as f64).total_cmp(&mean(q, &|v| dt_in[v] as f64))
                 }),
@@ -247,13 +261,26 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
     while v != start {
         v = pred2[v] as usize;
         if v == u32::MAX as usize || chain.len() > n {
-            return Err(Error::Other("mask centreline: broken predecessor chain".into()));
+            return Err(Error::Other(
+                "mask centreline: broken predecessor chain".into(),
+            ));
         }
         chain.push(v);
     }
     chain.reverse();
+    // The first 15 mm are dropped: segmentations often taper at the cut top of the trachea.
+    let pts: Vec<Point3<f64>> = chain.into_iter().map(world).collect();
+    let mut arc = 0.0;
+    let mut first = 0;
+    for k in 1..pts.len() {
+        arc += (pts[k] - pts[k - 1]).norm();
+        if arc >= 15.0 {
+            first = k;
+            break;
+        }
+    }
     Ok(MaskCentreline {
-        points: chain.into_iter().map(world).collect(),
+        points: pts[first..].to_vec(),
         sdf,
         split_depths_mm: splits,
     })

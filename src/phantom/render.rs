@@ -178,7 +178,11 @@ pub fn render_radiance(
                 return ([0.0; 3], [0.0; 3], false);
             }
             let p = gb.point[i];
-            let a = albedo.eval(crate::math::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64));
+            let a = albedo.eval(crate::math::Point3::new(
+                p[0] as f64,
+                p[1] as f64,
+                p[2] as f64,
+            ));
             let z = gb.z[i] as f64;
             let cos_t = rays.table.dirs[i][2] as f64;
             let e = light.intensity * light.cone(cos_t, k) / (z * z).max(1e-6);
@@ -215,8 +219,8 @@ pub fn render_radiance(
                         let s = &samples[(y * ss + sy) * fw + x * ss + sx];
                         if s.2 {
                             n += 1;
-                            for c in 0..3 {
-                                acc[c] += s.0[c] + amb * s.1[c];
+                            for ((a, l), al) in acc.iter_mut().zip(s.0).zip(s.1) {
+                                *a += l + amb * al;
                             }
                         }
                     }
@@ -312,7 +316,10 @@ mod tests {
         let (d, s) = l.brdf_cos(1.0);
         assert!((d - 0.97 / std::f64::consts::PI).abs() < 1e-12);
         let a = 0.09f64;
-        assert!((s - 0.03 / (4.0 * std::f64::consts::PI * a * a)).abs() < 1e-9, "{s}");
+        assert!(
+            (s - 0.03 / (4.0 * std::f64::consts::PI * a * a)).abs() < 1e-9,
+            "{s}"
+        );
         // The lobe is narrow: at 30° off the normal the specular is below 2 % of its peak.
         let (_, s30) = l.brdf_cos(30f64.to_radians().cos());
         assert!(s30 < 0.02 * s, "{s30} vs {s}");

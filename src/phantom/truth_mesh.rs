@@ -31,7 +31,9 @@ pub fn sample_tree_sdf(tree: &AirwayTree, h: f64, top_z: f64) -> Result<Volume<f
     }
     let world = |i: f64, j: f64, k: f64| Point3::new(lo.x + i * h, lo.y + j * h, lo.z + k * h);
     // Classify blocks of `b` voxels: Some(value) when the whole block has that sign.
-    let classify = |b: usize, parent: Option<(&Vec<Option<f32>>, usize, [usize; 3])>| {
+    // parent: (the coarser classification, its block size, its block-grid dims).
+    type Parent<'a> = Option<(&'a [Option<f32>], usize, [usize; 3])>;
+    let classify = |b: usize, parent: Parent| {
         let bd = dims.map(|d| d.div_ceil(b));
         (0..bd[0] * bd[1] * bd[2])
             .into_par_iter()
@@ -56,7 +58,7 @@ pub fn sample_tree_sdf(tree: &AirwayTree, h: f64, top_z: f64) -> Result<Volume<f
     };
     let coarse = classify(16, None);
     let cd = dims.map(|d| d.div_ceil(16));
-    let fine = classify(4, Some((&coarse, 16, cd)));
+    let fine = classify(4, Some((&coarse[..], 16, cd)));
     let fd = dims.map(|d| d.div_ceil(4));
     let mut data = vec![0f32; nx * ny * nz];
     data.par_chunks_mut(nx * ny)
@@ -145,7 +147,11 @@ mod tests {
         let v = sample_tree_sdf(&tree, 0.6, top).unwrap();
         let mut checked = 0;
         for q in (0..v.len()).step_by(97) {
-            let ijk = [q % v.dims[0], (q / v.dims[0]) % v.dims[1], q / (v.dims[0] * v.dims[1])];
+            let ijk = [
+                q % v.dims[0],
+                (q / v.dims[0]) % v.dims[1],
+                q / (v.dims[0] * v.dims[1]),
+            ];
             let p = v.index_to_world(Point3::new(ijk[0] as f64, ijk[1] as f64, ijk[2] as f64));
             let d = tree.lumen_sdf(p) as f32;
             let s = v.data[q];

@@ -101,7 +101,10 @@ impl<T: Copy> Volume<T> {
     pub fn voxel_at_world(&self, xyz: Point3<f64>) -> Option<[usize; 3]> {
         let p = self.world_to_index(xyz);
         let r = [p.x.round(), p.y.round(), p.z.round()];
-        if r.iter().zip(self.dims).any(|(&v, n)| !(v >= 0.0 && v < n as f64)) {
+        if r.iter()
+            .zip(self.dims)
+            .any(|(&v, n)| !(v >= 0.0 && v < n as f64))
+        {
             return None;
         }
         Some([r[0] as usize, r[1] as usize, r[2] as usize])
