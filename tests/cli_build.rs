@@ -16,7 +16,12 @@ fn run(args: &[&str], cwd: &Path) -> std::process::Output {
 fn phantom_then_build_writes_the_model_folder() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let o = run(&["phantom", "--out", "case", "--frames", "8", "--size", "128x128", "--quiet"], dir);
+    let o = run(
+        &[
+            "phantom", "--out", "case", "--frames", "8", "--size", "128x128", "--quiet",
+        ],
+        dir,
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let o = run(&["build", "case", "--out", "model", "--quiet"], dir);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -49,15 +54,27 @@ fn phantom_then_build_writes_the_model_folder() {
 
     // shading.json: one Psi per frame, at that frame's pose.
     let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(model.join("shading.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(model.join("shading.json")).unwrap())
+            .unwrap();
     assert_eq!(s["model"], "paper");
     let vps = s["viewpoints"].as_array().unwrap();
     assert_eq!(vps.len(), 8);
     let poses: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("case/poses.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(dir.join("case/poses.json")).unwrap())
+            .unwrap();
     for (vp, pose) in vps.iter().zip(poses["frames"].as_array().unwrap()) {
-        let a: Vec<f64> = vp["camera_to_world"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        let b: Vec<f64> = pose["camera_to_world"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let a: Vec<f64> = vp["camera_to_world"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let b: Vec<f64> = pose["camera_to_world"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
         assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-9));
         assert!(vp["z_min"].as_f64().unwrap() < vp["z_max"].as_f64().unwrap());
     }
@@ -73,7 +90,10 @@ fn phantom_then_build_writes_the_model_folder() {
 
     // The report embeds the figures (Fig. 2 a/b and Fig. 3 for three frames, and the atlas).
     let html = std::fs::read_to_string(model.join("report.html")).unwrap();
-    assert!(html.matches("<img").count() >= 3 * 5 + 1, "report has too few figures");
+    assert!(
+        html.matches("<img").count() >= 3 * 5 + 1,
+        "report has too few figures"
+    );
     assert!(html.contains("data:image/png;base64,"));
 
     // An existing model is not replaced without --force.

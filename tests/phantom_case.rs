@@ -7,7 +7,6 @@ use bronchosim::io::frames::read_png;
 use bronchosim::io::mesh_export::read_ply;
 use bronchosim::io::nifti::read_nifti;
 use bronchosim::io::poses::{read_poses, FrameRef};
-use bronchosim::math::Point3;
 use bronchosim::phantom::{
     write_phantom_case, AirwayTree, CtPhantomOptions, PhantomOptions, TreeOptions,
 };
@@ -210,11 +209,8 @@ fn phantom_case_is_deterministic_in_air_well_exposed_and_consistent() {
     );
 }
 
-/// A real ATM'22 tree (downsampled twice): the camera stays in the lumen and the case is
-/// valid. Slow in debug builds (reads a 512²·388 mask), hence ignored by default:
-/// `cargo test --release --test phantom_case -- --ignored`.
+/// A real ATM'22 tree (downsampled twice, ~4 s): the camera stays in air and descends.
 #[test]
-#[ignore]
 fn phantom_from_a_real_mask() {
     let mask = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../shared/data/atm22-airways/ATM_305_airway_mask.nii.gz");

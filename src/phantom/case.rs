@@ -183,50 +183,49 @@ pub fn write_phantom_case(out: &Path, opts: &PhantomOptions) -> Result<PhantomSu
     Ok(summary)
 }
 
+/// Signed distance (mm) to the true lumen wall, negative inside.
+type SdfFn = Box<dyn Fn(&Point3<f64>) -> f64 + Sync>;
+
 fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     let mut sm = PhantomSummary::default();
     let seed = opts.seed;
     let t = Instant::now();
     // The CT, the truth mesh and the signed distance the path is checked with.
-    let (ct, mesh, sdf_fn, centreline): (
-        Volume<f32>,
-        TriMesh,
-        Box<dyn Fn(&Point3<f64>) -> f64 + Sync>,
-        Vec<Point3<f64>>,
-    ) = match &opts.anatomy {
-        None => {
-            let mut co = opts.ct.clone();
-            co.tree.seed = seed;
-            co.seed = seed.wrapping_mul(31).wrapping_add(7);
-            let ph = make_ct_phantom(&co)?;
-            sm.seconds[0] = t.elapsed().as_secs_f64();
-            let t1 = Instant::now();
-            let top = ph.tree.branches[0].control[0].z - 5.0;
-            let mesh = tree_truth_mesh(&ph.tree, opts.truth_grid_mm, top, opts.max_triangles)?;
-            sm.seconds[1] = t1.elapsed().as_secs_f64();
-            let line = tree_centreline(&ph.tree);
-            let tree = ph.tree;
-            (ph.ct, mesh, Box::new(move |p| tree.lumen_sdf(*p)), line)
-        }
-        Some(mask_path) => {
-            let mut mo = opts.mask.clone();
-            mo.seed = seed.wrapping_mul(31).wrapping_add(11);
-            let ph = ct_from_mask_file(mask_path, &mo)?;
-            sm.seconds[0] = t.elapsed().as_secs_f64();
-            let t1 = Instant::now();
-            let mesh = mask_truth_mesh(&ph.truth_mask, opts.max_triangles)?;
-            sm.seconds[1] = t1.elapsed().as_secs_f64();
-            let cl = mask_centreline(&ph.truth_mask)
-                .map_err(|e| Error::invalid(mask_path, e.to_string()))?;
-            let sdf: Volume<f32> = cl.sdf;
-            (
-                ph.ct,
-                mesh,
-                Box::new(move |p| sdf.sample_world(*p).map_or(1.0, |v| v as f64)),
-                cl.points,
-            )
-        }
-    };
+    let (ct, mesh, sdf_fn, centreline): (Volume<f32>, TriMesh, SdfFn, Vec<Point3<f64>>) =
+        match &opts.anatomy {
+            None => {
+                let mut co = opts.ct.clone();
+                co.tree.seed = seed;
+                co.seed = seed.wrapping_mul(31).wrapping_add(7);
+                let ph = make_ct_phantom(&co)?;
+                sm.seconds[0] = t.elapsed().as_secs_f64();
+                let t1 = Instant::now();
+                let top = ph.tree.branches[0].control[0].z - 5.0;
+                let mesh = tree_truth_mesh(&ph.tree, opts.truth_grid_mm, top, opts.max_triangles)?;
+                sm.seconds[1] = t1.elapsed().as_secs_f64();
+                let line = tree_centreline(&ph.tree);
+                let tree = ph.tree;
+                (ph.ct, mesh, Box::new(move |p| tree.lumen_sdf(*p)), line)
+            }
+            Some(mask_path) => {
+                let mut mo = opts.mask.clone();
+                mo.seed = seed.wrapping_mul(31).wrapping_add(11);
+                let ph = ct_from_mask_file(mask_path, &mo)?;
+                sm.seconds[0] = t.elapsed().as_secs_f64();
+                let t1 = Instant::now();
+                let mesh = mask_truth_mesh(&ph.truth_mask, opts.max_triangles)?;
+                sm.seconds[1] = t1.elapsed().as_secs_f64();
+                let cl = mask_centreline(&ph.truth_mask)
+                    .map_err(|e| Error::invalid(mask_path, e.to_string()))?;
+                let sdf: Volume<f32> = cl.sdf;
+                (
+                    ph.ct,
+                    mesh,
+                    Box::new(move |p| sdf.sample_world(*p).map_or(1.0, |v| v as f64)),
+                    cl.points,
+                )
+            }
+        };
     sm.ct_dims = ct.dims;
     sm.mesh_vertices = mesh.positions.len();
     sm.mesh_triangles = mesh.triangles.len();

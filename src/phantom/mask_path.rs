@@ -21,7 +21,8 @@ use std::collections::BinaryHeap;
 /// The centreline through a mask and the signed distance it was found with.
 #[derive(Clone, Debug)]
 pub struct MaskCentreline {
-    /// Voxel-centre polyline from the trachea's top to the target (world mm), unsmoothed.
+    /// Voxel-centre polyline from 15 mm below the trachea's top to the target (world mm),
+    /// unsmoothed.
     pub points: Vec<Point3<f64>>,
     /// Signed distance to the lumen wall (mm, negative inside), on the mask's grid.
     pub sdf: Volume<f32>,
@@ -267,8 +268,19 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
         chain.push(v);
     }
     chain.reverse();
+    // The first 15 mm are dropped: segmentations often taper at the cut top of the trachea.
+    let pts: Vec<Point3<f64>> = chain.into_iter().map(world).collect();
+    let mut arc = 0.0;
+    let mut first = 0;
+    for k in 1..pts.len() {
+        arc += (pts[k] - pts[k - 1]).norm();
+        if arc >= 15.0 {
+            first = k;
+            break;
+        }
+    }
     Ok(MaskCentreline {
-        points: chain.into_iter().map(world).collect(),
+        points: pts[first..].to_vec(),
         sdf,
         split_depths_mm: splits,
     })

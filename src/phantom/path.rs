@@ -47,14 +47,14 @@ impl Default for PathOptions {
 }
 
 /// The centreline the built-in tree's path follows (world mm): the trachea from 15 mm below
-/// its top to the carina, the right main bronchus, then 75 % of its wider child (lobar).
+/// its top to 6 mm above the carina, the right main bronchus from 6 mm in, then 75 % of its wider child (lobar).
 pub fn tree_centreline(tree: &AirwayTree) -> Vec<Point3<f64>> {
     let tr = &tree.branches[0];
     let mut pts: Vec<Point3<f64>> = tr
         .centreline
         .iter()
         .zip(&tr.arc_mm)
-        .filter(|(_, &s)| s >= 15.0)
+        .filter(|(_, &s)| s >= 15.0 && s <= tr.length_mm() - 6.0)
         .map(|(p, _)| *p)
         .collect();
     // The right main bronchus: the gen-1 child leaning toward +x (RAS right).
@@ -67,7 +67,15 @@ pub fn tree_centreline(tree: &AirwayTree) -> Vec<Point3<f64>> {
             dx(a).total_cmp(&dx(b))
         })
         .expect("the tree has main bronchi");
-    pts.extend(main.centreline.iter().skip(1));
+    // The corner at the carina is cut (6 mm either side), as a bronchoscopist steers into the
+    // main bronchus before reaching the carina's ridge.
+    pts.extend(
+        main.centreline
+            .iter()
+            .zip(&main.arc_mm)
+            .filter(|(_, &s)| s >= 6.0)
+            .map(|(p, _)| *p),
+    );
     if let Some(lobar) = tree
         .branches
         .iter()
@@ -259,8 +267,31 @@ fn keep_inside(
     *centre
 }
 
+/// Arc length (mm) of `path` usable by cameras: up to `max_len`, and stopping 1 mm before the
+/// first point with less than the clearance (plus 0.25 mm) to the wall (narrow distal ends).
+fn usable_length(
+    path: &SmoothPath,
+    sdf: &dyn Fn(&Point3<f64>) -> f64,
+    clearance: f64,
+    max_len: f64,
+) -> Result<f64> {
+    let mut len = max_len;
+    for (k, p) in path.points.iter().enumerate() {
+        if -sdf(p) < clearance + 0.25 {
+            len = len.min(k as f64 * path.step - 1.0);
+            break;
+        }
+    }
+    if len < 10.0 {
+        return Err(Error::Other(format!(
+            "camera path: only {len:.1} mm of the centreline keep {clearance} mm from the wall"
+        )));
+    }
+    Ok(len)
+}
+
 /// Training poses along `path`: equal arc steps from its start to `look_ahead_mm` before its
-/// end, with wobble; `sdf(p)` is the signed distance (mm) to the wall, negative inside.
+/// end (or where the lumen gets too narrow), with wobble; `sdf(p)` is the signed distance (mm) to the wall, negative inside.
 /// Fails when a centreline point itself lacks the clearance.
 pub fn camera_path(
     path: &SmoothPath,
@@ -278,7 +309,12 @@ pub fn camera_path(
         Wobble::new(&mut rng),
         Wobble::new(&mut rng),
     );
-    let len = (path.length() - 0.5 * opts.look_ahead_mm).max(0.0);
+    let len = usable_length(
+        path,
+        sdf,
+        opts.min_clearance_mm,
+        path.length() - 0.5 * opts.look_ahead_mm,
+    )?;
     // Image "down" starts posterior (-y RAS) and is parallel-transported along the path.
     let mut down = Vector3::new(0.0, -1.0, 0.0);
     let mut poses = Vec::with_capacity(opts.frames);
@@ -326,7 +362,12 @@ pub fn novel_views(
     opts: &PathOptions,
 ) -> Result<Vec<Affine>> {
     let mut rng = Pcg32::new(opts.seed, 0x7E5);
-    let len = (path.length() - opts.look_ahead_mm).max(0.0);
+    let len = usable_length(
+        path,
+        sdf,
+        opts.min_clearance_mm,
+        path.length() - opts.look_ahead_mm,
+    )?;
     let mut down = Vector3::new(0.0, -1.0, 0.0);
     let mut views = Vec::with_capacity(count);
     for k in 0..count {

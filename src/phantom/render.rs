@@ -219,8 +219,8 @@ pub fn render_radiance(
                         let s = &samples[(y * ss + sy) * fw + x * ss + sx];
                         if s.2 {
                             n += 1;
-                            for c in 0..3 {
-                                acc[c] += s.0[c] + amb * s.1[c];
+                            for ((a, l), al) in acc.iter_mut().zip(s.0).zip(s.1) {
+                                *a += l + amb * al;
                             }
                         }
                     }

@@ -31,7 +31,9 @@ pub fn sample_tree_sdf(tree: &AirwayTree, h: f64, top_z: f64) -> Result<Volume<f
     }
     let world = |i: f64, j: f64, k: f64| Point3::new(lo.x + i * h, lo.y + j * h, lo.z + k * h);
     // Classify blocks of `b` voxels: Some(value) when the whole block has that sign.
-    let classify = |b: usize, parent: Option<(&Vec<Option<f32>>, usize, [usize; 3])>| {
+    // parent: (the coarser classification, its block size, its block-grid dims).
+    type Parent<'a> = Option<(&'a [Option<f32>], usize, [usize; 3])>;
+    let classify = |b: usize, parent: Parent| {
         let bd = dims.map(|d| d.div_ceil(b));
         (0..bd[0] * bd[1] * bd[2])
             .into_par_iter()
@@ -56,7 +58,7 @@ pub fn sample_tree_sdf(tree: &AirwayTree, h: f64, top_z: f64) -> Result<Volume<f
     };
     let coarse = classify(16, None);
     let cd = dims.map(|d| d.div_ceil(16));
-    let fine = classify(4, Some((&coarse, 16, cd)));
+    let fine = classify(4, Some((&coarse[..], 16, cd)));
     let fd = dims.map(|d| d.div_ceil(4));
     let mut data = vec![0f32; nx * ny * nz];
     data.par_chunks_mut(nx * ny)
