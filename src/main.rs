@@ -5,6 +5,7 @@ use bronchosim::inspect::{inspect_case, InspectOptions};
 use bronchosim::math::Point3;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::workflow::build::{build_model, BuildOptions};
+use bronchosim::workflow::demo::run_demo;
 use bronchosim::workflow::segment::{
     default_segment_out, parse_point, segment_command, SegmentCommandOptions,
 };
@@ -92,6 +93,19 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+    /// The embedded default: write the phantom case (CT, video, poses, camera, truth) and build
+    /// its model; open DIR/model/report.html afterwards.
+    Demo {
+        /// Folder for the case and the model.
+        #[arg(long, default_value = "bronchosim-demo")]
+        out: PathBuf,
+        /// Number of video frames of the phantom.
+        #[arg(long, default_value_t = 80)]
+        frames: usize,
+        /// Replace the folder if it exists.
+        #[arg(long)]
+        force: bool,
+    },
     /// Write a synthetic case (CT, frames, poses, camera) with its truth in CASE/truth/.
     Phantom {
         /// The case folder to create.
@@ -136,6 +150,36 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Demo { out, frames, force } => {
+            let phantom = PhantomOptions {
+                frames,
+                ..Default::default()
+            };
+            let build = BuildOptions {
+                quiet: cli.quiet,
+                ..Default::default()
+            };
+            let d = run_demo(&out, &phantom, &build, force)
+                .with_context(|| format!("demo {}", out.display()))?;
+            if !cli.quiet {
+                let m = &d.manifest;
+                println!(
+                    "phantom case {} ({} frames, {:.1} s)\nmodel {} in {:.1} s: {} triangles, atlas {}x{}, {:.0}% of chart texels seen, mean R² of Psi {:.3}\nreport {}",
+                    d.case.display(),
+                    m.counts.frames,
+                    d.phantom_seconds,
+                    d.model.display(),
+                    m.timings.total,
+                    m.counts.triangles,
+                    m.counts.atlas_size[0],
+                    m.counts.atlas_size[1],
+                    100.0 * m.counts.covered_texels as f64 / m.counts.chart_texels.max(1) as f64,
+                    m.mean_r2,
+                    d.model.join("report.html").display()
+                );
+            }
+            Ok(())
+        }
         Command::Build {
             case,
             out,

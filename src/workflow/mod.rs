@@ -2,6 +2,7 @@
 //! they chain the stages and write results atomically. `main.rs` only parses and calls these.
 
 pub mod build;
+pub mod demo;
 pub mod progress;
 pub mod report;
 pub mod segment;
