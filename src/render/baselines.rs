@@ -74,13 +74,10 @@ pub fn reproject_nearest_frame(
                 return None;
             }
             let p = view.point[i];
-            let q = transform_point(
-                &to_cam,
-                &Point3::new(p[0] as f64, p[1] as f64, p[2] as f64),
-            );
+            let q = transform_point(&to_cam, &Point3::new(p[0] as f64, p[1] as f64, p[2] as f64));
             let uv = training_camera.project(&q)?;
-            let dist = ((p[0] - tc[0]).powi(2) + (p[1] - tc[1]).powi(2) + (p[2] - tc[2]).powi(2))
-                .sqrt();
+            let dist =
+                ((p[0] - tc[0]).powi(2) + (p[1] - tc[1]).powi(2) + (p[2] - tc[2]).powi(2)).sqrt();
             if !visible(&train, uv.x, uv.y, dist) {
                 return None;
             }

@@ -106,8 +106,9 @@ pub fn psnr_masked(a: &[f32], b: &[f32], mask: &[bool]) -> Option<f64> {
 
 /// The 1-D Gaussian window (scipy's `gaussian_filter` weights for σ = 1.5, radius 5).
 fn kernel() -> [f64; 2 * RADIUS + 1] {
-    let mut k: [f64; 2 * RADIUS + 1] =
-        std::array::from_fn(|i| (-((i as f64 - RADIUS as f64).powi(2)) / (2.0 * SIGMA * SIGMA)).exp());
+    let mut k: [f64; 2 * RADIUS + 1] = std::array::from_fn(|i| {
+        (-((i as f64 - RADIUS as f64).powi(2)) / (2.0 * SIGMA * SIGMA)).exp()
+    });
     let s: f64 = k.iter().sum();
     k.iter_mut().for_each(|v| *v /= s);
     k
@@ -177,8 +178,7 @@ pub fn ssim_map(x: &[f64], y: &[f64], w: usize, h: usize, mask: &[bool]) -> Vec<
             let vx = gxx[i] * n - ux * ux;
             let vy = gyy[i] * n - uy * uy;
             let vxy = gxy[i] * n - ux * uy;
-            ((2.0 * ux * uy + c1) * (2.0 * vxy + c2))
-                / ((ux * ux + uy * uy + c1) * (vx + vy + c2))
+            ((2.0 * ux * uy + c1) * (2.0 * vxy + c2)) / ((ux * ux + uy * uy + c1) * (vx + vy + c2))
         })
         .collect()
 }
@@ -199,7 +199,10 @@ pub fn ssim_masked(a: &[f32], b: &[f32], w: usize, h: usize, mask: &[bool]) -> O
         let x: Vec<f64> = (0..w * h).map(|i| a[3 * i + ch] as f64).collect();
         let y: Vec<f64> = (0..w * h).map(|i| b[3 * i + ch] as f64).collect();
         let s = ssim_map(&x, &y, w, h, mask);
-        let sum: f64 = (0..w * h).filter(|&i| mask[i] && inner(i)).map(|i| s[i]).sum();
+        let sum: f64 = (0..w * h)
+            .filter(|&i| mask[i] && inner(i))
+            .map(|i| s[i])
+            .sum();
         total += sum / count as f64;
     }
     Some(total / 3.0)
@@ -306,7 +309,11 @@ pub fn scores_text(scores: &[MethodScore]) -> String {
     let fmt = |x: Option<f64>, d: usize| x.map_or("-".to_string(), |v| format!("{v:.d$}"));
     s.push_str(&format!("{:<28}", "view"));
     for m in scores {
-        s.push_str(&format!(" {:>14} {:>8}", format!("{} PSNR", m.method), "SSIM"));
+        s.push_str(&format!(
+            " {:>14} {:>8}",
+            format!("{} PSNR", m.method),
+            "SSIM"
+        ));
     }
     s.push('\n');
     let n = scores.first().map_or(0, |m| m.views.len());
@@ -314,7 +321,11 @@ pub fn scores_text(scores: &[MethodScore]) -> String {
         s.push_str(&format!("{:<28}", scores[0].views[v].name));
         for m in scores {
             let vs = &m.views[v];
-            s.push_str(&format!(" {:>14} {:>8}", fmt(vs.psnr_db, 2), fmt(vs.ssim, 4)));
+            s.push_str(&format!(
+                " {:>14} {:>8}",
+                fmt(vs.psnr_db, 2),
+                fmt(vs.ssim, 4)
+            ));
         }
         s.push('\n');
     }

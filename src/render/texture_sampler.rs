@@ -125,7 +125,11 @@ impl MipTexture {
     #[inline]
     pub fn sample(&self, u: f32, v: f32, lod: f32) -> [f32; 3] {
         let top = (self.levels.len() - 1) as f32;
-        let lod = if lod.is_nan() { 0.0 } else { lod.clamp(0.0, top) };
+        let lod = if lod.is_nan() {
+            0.0
+        } else {
+            lod.clamp(0.0, top)
+        };
         let l0 = lod.floor() as usize;
         let f = lod - l0 as f32;
         let a = self.bilinear(l0, u, v);
@@ -225,7 +229,10 @@ mod tests {
         assert_eq!(t.level_count(), 3);
         // Level 2 is one texel mixing chart and gutter: the chart colour, not half of it.
         let c = t.sample(0.5, 0.5, 2.0);
-        assert!((c[0] - 0.8).abs() < 1e-6 && (c[2] - 0.2).abs() < 1e-6, "{c:?}");
+        assert!(
+            (c[0] - 0.8).abs() < 1e-6 && (c[2] - 0.2).abs() < 1e-6,
+            "{c:?}"
+        );
         // Level 0 at a texel centre returns the texel.
         let c = t.sample(0.125, 0.375, 0.0);
         assert!((c[1] - 0.4).abs() < 1e-6);
