@@ -1,6 +1,9 @@
 //! Novel-view rendering and evaluation (issue 7, parts 1 and 5) on a bent tube with a known
 //! albedo painted into a real texture atlas.
 
+// Index loops over parallel per-pixel arrays read more clearly than zipped iterators here.
+#![allow(clippy::needless_range_loop)]
+
 use std::path::Path;
 
 use bronchosim::camera::Camera;

@@ -124,11 +124,11 @@ pub fn flat_albedo_view(
     let g = cast_frame(scene, camera, camera_to_world);
     let mut frame = Frame::new(camera.width, camera.height);
     let mut mask = vec![false; g.tri.len()];
-    for i in 0..g.tri.len() {
+    for (i, m) in mask.iter_mut().enumerate() {
         if g.hit(i) {
             let v = g.gamma[i] / (g.z[i] * g.z[i]);
             frame.rgb[3 * i..3 * i + 3].copy_from_slice(&[v; 3]);
-            mask[i] = true;
+            *m = true;
         }
     }
     (frame, mask)

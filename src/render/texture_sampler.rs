@@ -196,8 +196,8 @@ fn downsample(prev: &Level) -> Level {
                 let (sx, sy) = (2 * x + dx, 2 * y + dy);
                 if sx < prev.width && sy < prev.height {
                     let i = 4 * (sy * prev.width + sx);
-                    for k in 0..4 {
-                        o[k] += 0.25 * prev.data[i + k];
+                    for (k, ov) in o.iter_mut().enumerate() {
+                        *ov += 0.25 * prev.data[i + k];
                     }
                 }
             }
