@@ -12,6 +12,7 @@ pub mod math;
 pub mod mesh;
 pub mod phantom;
 pub mod raycast;
+pub mod render;
 pub mod shading;
 pub mod texture;
 pub mod volume;

@@ -133,6 +133,23 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+    /// Score rendered views against reference images: PSNR and SSIM on the pixels both cover,
+    /// after one least-squares gain per channel over all views.
+    Evaluate {
+        /// Folder of rendered views: the images named in the truth's views.json (and their
+        /// `<stem>_mask.png` hit masks, when present).
+        rendered: PathBuf,
+        /// Truth folder: views.json, the reference images it names, optional `<stem>_mask.png`.
+        #[arg(long)]
+        truth: PathBuf,
+        /// Also score the baselines (nearest training frame reprojected; flat albedo with
+        /// cos(gamma)/z^2 shading) on the same pixels. Needs the model folder.
+        #[arg(long)]
+        baselines: bool,
+        /// Print the scores as JSON.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 /// Parse "WxH" into (width, height).
@@ -310,6 +327,28 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     s.seconds[4],
                     s.seconds[5]
                 );
+            }
+            Ok(())
+        }
+        Command::Evaluate {
+            rendered,
+            truth,
+            baselines,
+            json,
+        } => {
+            if baselines {
+                // The baselines are library functions (render::baselines); producing their
+                // frames needs the model folder and the case, wired with `build`.
+                anyhow::bail!(
+                    "evaluate --baselines: not available yet (needs the model folder written by build)"
+                );
+            }
+            let scores = bronchosim::render::evaluate_folders(&rendered, &truth, Vec::new())
+                .with_context(|| format!("evaluate {}", rendered.display()))?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&scores)?);
+            } else {
+                print!("{}", bronchosim::render::evaluate::scores_text(&scores));
             }
             Ok(())
         }

@@ -49,9 +49,21 @@ fn phantom_then_build_writes_the_model_folder() {
     let r2 = m["mean_r2"].as_f64().unwrap();
     assert!(r2 > 0.45, "mean R² {r2}");
     for f in m["fit_quality"].as_array().unwrap() {
-        let c: Vec<f64> = f["r2"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        println!("frame {}: R² of Psi R {:.3} G {:.3} B {:.3}, {} samples", f["frame"], c[0], c[1], c[2], f["samples"]);
-        assert!(c[0] > 0.6 && c[1] > 0.3 && c[2] > 0.3, "frame {}: R² {c:?}", f["frame"]);
+        let c: Vec<f64> = f["r2"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        println!(
+            "frame {}: R² of Psi R {:.3} G {:.3} B {:.3}, {} samples",
+            f["frame"], c[0], c[1], c[2], f["samples"]
+        );
+        assert!(
+            c[0] > 0.6 && c[1] > 0.3 && c[2] > 0.3,
+            "frame {}: R² {c:?}",
+            f["frame"]
+        );
     }
     assert!(m["atlas_mean_l2_stretch"].as_f64().unwrap() < 1.1);
     let total = m["timings"]["total"].as_f64().unwrap();

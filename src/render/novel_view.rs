@@ -1,0 +1,228 @@
+//! Rendering a new view (paper §2.4): ray cast the mesh from the new viewpoint, shade with the
+//! fitted Psi evaluated at the new view's gamma and z, multiply by the fused albedo texture.
+
+use rayon::prelude::*;
+
+use super::shading_lookup::{BlendedPsi, ShadingMode, ViewpointIndex};
+use super::texture_sampler::MipTexture;
+use crate::camera::Camera;
+use crate::io::frames::Frame;
+use crate::math::Affine;
+use crate::raycast::Scene;
+use crate::shading::psi::PsiModel;
+use crate::texture::atlas::Atlas;
+use crate::{Error, Result};
+
+/// Everything a view is rendered from. Triangle `t` of `scene` has UV corners `tri_uv[t]`
+/// (the atlas keeps the mesh's triangle order, so the scene may be built from the original
+/// mesh, whose smooth normals do not break at chart seams).
+#[derive(Clone, Copy)]
+pub struct RenderInputs<'a> {
+    /// The lumen mesh, ready for ray casting.
+    pub scene: &'a Scene,
+    /// UV (atlas convention, [0, 1]) of the three corners of every triangle.
+    pub tri_uv: &'a [[[f32; 2]; 3]],
+    /// The fused albedo with its mip chain.
+    pub texture: &'a MipTexture,
+    /// The fitted shading of every training viewpoint.
+    pub psi: &'a [PsiModel],
+    /// Centres and directions of `psi` (build once with [`ViewpointIndex::new`]).
+    pub index: &'a ViewpointIndex,
+}
+
+/// UV corners of every triangle of an atlas (input to [`RenderInputs::tri_uv`]).
+pub fn triangle_uvs(atlas: &Atlas) -> Vec<[[f32; 2]; 3]> {
+    atlas
+        .mesh
+        .triangles
+        .iter()
+        .map(|t| t.map(|v| atlas.uv[v as usize]))
+        .collect()
+}
+
+/// Options of [`render_view`]. Steps per pixel: cast `supersample²` rays (stratified in the
+/// pixel), shade each hit with Psi (`shading`) × texture (trilinear, level from the ray's
+/// footprint on the surface), average the hits, multiply by `gain`.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    /// Which fitted Psi shade the view.
+    pub shading: ShadingMode,
+    /// Rays per pixel along each axis (1 = one ray through the pixel centre).
+    pub supersample: u32,
+    /// Choose the texture level from the footprint (false = bilinear on level 0 only).
+    pub mipmap: bool,
+    /// Exposure: output = gain × Psi × albedo (linear).
+    pub gain: f32,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            shading: ShadingMode::default(),
+            supersample: 1,
+            mipmap: true,
+            gain: 1.0,
+        }
+    }
+}
+
+/// Sub-pixel ray directions of a camera (camera coordinates, unit, lens distortion undone) and
+/// the angle one pixel subtends at each pixel. Build once per camera and supersampling factor.
+#[derive(Clone, Debug)]
+pub struct ViewRays {
+    /// Image width (pixels).
+    pub width: u32,
+    /// Image height (pixels).
+    pub height: u32,
+    /// Rays per pixel along each axis.
+    pub supersample: u32,
+    /// `supersample²` unit directions per pixel, pixel-major (row-major pixels).
+    pub dirs: Vec<[f32; 3]>,
+    /// Angle between neighbouring pixel-centre rays at each pixel (radians; the larger of the
+    /// horizontal and vertical one).
+    pub pixel_angle: Vec<f32>,
+}
+
+impl ViewRays {
+    /// Tabulate the rays of `camera` with `supersample` x `supersample` rays per pixel.
+    pub fn new(camera: &Camera, supersample: u32) -> Result<ViewRays> {
+        camera
+            .validate()
+            .map_err(|m| Error::Other(format!("render: bad camera: {m}")))?;
+        let s = supersample.max(1) as usize;
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let ray = |u: f64, v: f64| {
+            let d = camera.pixel_ray(u, v);
+            [d.x as f32, d.y as f32, d.z as f32]
+        };
+        let dirs: Vec<[f32; 3]> = (0..w * h)
+            .into_par_iter()
+            .with_min_len(256)
+            .flat_map_iter(|i| {
+                let (x, y) = ((i % w) as f64, (i / w) as f64);
+                (0..s * s).map(move |j| {
+                    let ox = ((j % s) as f64 + 0.5) / s as f64 - 0.5;
+                    let oy = ((j / s) as f64 + 0.5) / s as f64 - 0.5;
+                    ray(x + ox, y + oy)
+                })
+            })
+            .collect();
+        let angle = |a: [f32; 3], b: [f32; 3]| {
+            let c = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).clamp(-1.0, 1.0);
+            c.acos()
+        };
+        let pixel_angle = (0..w * h)
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|i| {
+                let (x, y) = ((i % w) as f64, (i / w) as f64);
+                let c = ray(x, y);
+                angle(c, ray(x + 1.0, y)).max(angle(c, ray(x, y + 1.0)))
+            })
+            .collect();
+        Ok(ViewRays {
+            width: camera.width,
+            height: camera.height,
+            supersample: s as u32,
+            dirs,
+            pixel_angle,
+        })
+    }
+}
+
+/// Render one view: linear RGB and the hit mask (true where some ray of the pixel hits the
+/// mesh). `camera_to_world` is the new camera's pose (world mm, OpenCV axes).
+pub fn render_view(
+    inputs: &RenderInputs,
+    camera: &Camera,
+    camera_to_world: &Affine,
+    opts: &RenderOptions,
+) -> Result<(Frame, Vec<bool>)> {
+    let rays = ViewRays::new(camera, opts.supersample)?;
+    render_view_with(inputs, &rays, camera_to_world, opts)
+}
+
+/// [`render_view`] with precomputed rays (`opts.supersample` is taken from `rays`). Parallel
+/// over rows.
+pub fn render_view_with(
+    inputs: &RenderInputs,
+    rays: &ViewRays,
+    camera_to_world: &Affine,
+    opts: &RenderOptions,
+) -> Result<(Frame, Vec<bool>)> {
+    if inputs.tri_uv.len() != inputs.scene.triangle_count() {
+        return Err(Error::Other(format!(
+            "render: {} triangle UVs for a mesh of {} triangles",
+            inputs.tri_uv.len(),
+            inputs.scene.triangle_count()
+        )));
+    }
+    if inputs.psi.is_empty() || inputs.index.len() != inputs.psi.len() {
+        return Err(Error::Other(format!(
+            "render: {} shading models and an index of {} viewpoints (need at least one of each, equal)",
+            inputs.psi.len(),
+            inputs.index.len()
+        )));
+    }
+    let shade = BlendedPsi::new(inputs.psi, inputs.index, camera_to_world, opts.shading);
+    let m = camera_to_world;
+    let org = [m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32];
+    let rot: [[f32; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)] as f32));
+    let (w, h) = (rays.width as usize, rays.height as usize);
+    let ss = (rays.supersample as usize).pow(2);
+    let tex = inputs.texture;
+    // The footprint of one sub-pixel ray: the pixel angle shrinks with supersampling.
+    let angle_scale = 1.0 / rays.supersample as f32;
+
+    let mut frame = Frame::new(rays.width, rays.height);
+    let mut mask = vec![false; w * h];
+    frame
+        .rgb
+        .par_chunks_mut(3 * w)
+        .zip(mask.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(y, (row, mrow))| {
+            for x in 0..w {
+                let p = y * w + x;
+                let mut acc = [0.0f32; 3];
+                let mut hits = 0u32;
+                for d in &rays.dirs[p * ss..(p + 1) * ss] {
+                    let dir = std::array::from_fn(|i| {
+                        rot[i][0] * d[0] + rot[i][1] * d[1] + rot[i][2] * d[2]
+                    });
+                    let Some(hit) = inputs.scene.closest_hit(org, dir, f32::INFINITY) else {
+                        continue;
+                    };
+                    let n = inputs.scene.shading_normal(hit.tri, hit.u, hit.v);
+                    let gamma = (n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2])
+                        .abs()
+                        .min(1.0);
+                    let z = hit.t;
+                    let [a, b, c] = inputs.tri_uv[hit.tri as usize];
+                    let wa = 1.0 - hit.u - hit.v;
+                    let u = wa * a[0] + hit.u * b[0] + hit.v * c[0];
+                    let v = wa * a[1] + hit.u * b[1] + hit.v * c[1];
+                    let albedo = if opts.mipmap {
+                        // Footprint along the surface's steepest direction: z·angle/gamma.
+                        let fp = z * rays.pixel_angle[p] * angle_scale / gamma.max(1e-3);
+                        tex.sample(u, v, tex.lod(fp))
+                    } else {
+                        tex.sample_bilinear(u, v)
+                    };
+                    let psi = shade.eval_rgb(gamma, z);
+                    for k in 0..3 {
+                        acc[k] += psi[k] * albedo[k];
+                    }
+                    hits += 1;
+                }
+                if hits > 0 {
+                    let s = opts.gain / hits as f32;
+                    for k in 0..3 {
+                        row[3 * x + k] = acc[k] * s;
+                    }
+                    mrow[x] = true;
+                }
+            }
+        });
+    Ok((frame, mask))
+}

@@ -1,0 +1,470 @@
+//! Novel-view rendering and evaluation (issue 7, parts 1 and 5) on a bent tube with a known
+//! albedo painted into a real texture atlas.
+
+// Index loops over parallel per-pixel arrays read more clearly than zipped iterators here.
+#![allow(clippy::needless_range_loop)]
+
+use std::path::Path;
+
+use bronchosim::camera::Camera;
+use bronchosim::io::frames::{linear_to_srgb, srgb_to_linear, Frame};
+use bronchosim::math::{Affine, Point3, Vector3};
+use bronchosim::mesh::TriMesh;
+use bronchosim::raycast::{cast_frame, Scene};
+use bronchosim::render::evaluate::{psnr_masked, ssim_masked};
+use bronchosim::render::{
+    evaluate_methods, flat_albedo_view, read_views, render_view, reproject_nearest_frame,
+    triangle_uvs, MaskedImage, MipOptions, MipTexture, RenderInputs, RenderOptions, ShadingMode,
+    TrainingView, ViewpointIndex,
+};
+use bronchosim::shading::{ExclusionCounts, PsiModel};
+use bronchosim::texture::atlas::{build_atlas, rasterize_texels, AtlasOptions};
+
+/// Bend radius of the tube's centreline (mm) and tube radius (mm).
+const BEND: f32 = 40.0;
+const RADIUS: f32 = 6.0;
+
+/// A quarter torus: centreline (BEND cos t, 0, BEND sin t), t in [0, pi/2].
+fn bent_tube(rings: usize, around: usize) -> TriMesh {
+    let mut positions = Vec::new();
+    for i in 0..=rings {
+        let t = std::f32::consts::FRAC_PI_2 * i as f32 / rings as f32;
+        let radial = Vector3::new(t.cos(), 0.0, t.sin());
+        for j in 0..around {
+            let a = std::f32::consts::TAU * j as f32 / around as f32;
+            let p = radial * (BEND + RADIUS * a.cos()) + Vector3::new(0.0, RADIUS * a.sin(), 0.0);
+            positions.push(Point3::from(p));
+        }
+    }
+    let mut triangles = Vec::new();
+    let id = |i: usize, j: usize| (i * around + j % around) as u32;
+    for i in 0..rings {
+        for j in 0..around {
+            triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    TriMesh {
+        positions,
+        triangles,
+    }
+}
+
+/// Arc length (mm) along the centreline of the point's cross-section.
+fn arc_mm(p: [f32; 3]) -> f32 {
+    BEND * p[2].atan2(p[0])
+}
+
+/// A smooth mucosa-like albedo: a few mm wavelengths along and around the tube.
+fn smooth_albedo(p: [f32; 3]) -> [f32; 3] {
+    let s = arc_mm(p);
+    let a = p[1].atan2((p[0] * p[0] + p[2] * p[2]).sqrt() - BEND);
+    let v = 0.5 + 0.25 * (s / 2.5).sin() * (2.0 * a).cos();
+    [v, 0.8 * v + 0.1, 0.4 * v + 0.05]
+}
+
+/// Stripes of period 0.6 mm along the tube (4 texels at 0.15 mm): aliases when distant.
+fn stripes(p: [f32; 3]) -> [f32; 3] {
+    let v = if (arc_mm(p) / 0.3).floor() as i64 % 2 == 0 {
+        0.9
+    } else {
+        0.1
+    };
+    [v; 3]
+}
+
+struct Fixture {
+    mesh: TriMesh,
+    scene: Scene,
+    tri_uv: Vec<[[f32; 2]; 3]>,
+    texture: MipTexture,
+    plain: MipTexture,
+}
+
+fn fixture(albedo: fn([f32; 3]) -> [f32; 3]) -> Fixture {
+    let mesh = bent_tube(120, 48);
+    let atlas = build_atlas(&mesh, &AtlasOptions::default()).unwrap();
+    let texels = rasterize_texels(&atlas, &mesh).unwrap();
+    let mut img = Frame::new(atlas.width, atlas.height);
+    let mut cov = vec![false; (atlas.width * atlas.height) as usize];
+    for (k, &t) in texels.texel.iter().enumerate() {
+        let c = albedo(texels.point[k]);
+        img.rgb[3 * t as usize..3 * t as usize + 3].copy_from_slice(&c);
+        cov[t as usize] = true;
+    }
+    let texture =
+        MipTexture::new(&img, Some(&cov), atlas.texel_mm, &MipOptions::default()).unwrap();
+    let plain = MipTexture::new(
+        &img,
+        Some(&cov),
+        atlas.texel_mm,
+        &MipOptions { max_level: 0 },
+    )
+    .unwrap();
+    Fixture {
+        scene: Scene::new(&mesh).unwrap(),
+        tri_uv: triangle_uvs(&atlas),
+        mesh,
+        texture,
+        plain,
+    }
+}
+
+/// A camera on the centreline at arc angle `t` (rad), looking along the tube, shifted by
+/// `lateral` mm towards the outer wall.
+fn pose_at(t: f32, lateral: f32) -> Affine {
+    let (t, l) = (t as f64, lateral as f64);
+    let z = Vector3::new(-t.sin(), 0.0, t.cos());
+    let y = Vector3::new(0.0, 1.0, 0.0);
+    let x = y.cross(&z);
+    let c = Vector3::new(t.cos(), 0.0, t.sin()) * (BEND as f64 + l);
+    let mut m = Affine::identity();
+    for r in 0..3 {
+        m[(r, 0)] = x[r];
+        m[(r, 1)] = y[r];
+        m[(r, 2)] = z[r];
+        m[(r, 3)] = c[r];
+    }
+    m
+}
+
+fn psi_at(pose: &Affine, scale: f64) -> PsiModel {
+    let mut c2w = [0.0; 16];
+    for k in 0..16 {
+        c2w[k] = pose[(k / 4, k % 4)];
+    }
+    PsiModel {
+        camera_to_world: c2w,
+        z_min: 2.0,
+        z_max: 40.0,
+        c: [
+            [0.05 * scale, 0.3 * scale, 0.6 * scale, 0.9 * scale],
+            [0.04 * scale, 0.25 * scale, 0.55 * scale, 0.8 * scale],
+            [0.03 * scale, 0.2 * scale, 0.5 * scale, 0.7 * scale],
+        ],
+        d: [[0.6, 0.3, 0.1]; 3],
+        rms_residual: [0.0; 3],
+        samples_used: 0,
+        excluded: ExclusionCounts::default(),
+    }
+}
+
+fn camera(n: u32, f: f64) -> Camera {
+    Camera {
+        width: n,
+        height: n,
+        fx: f,
+        fy: f,
+        cx: (n as f64 - 1.0) / 2.0,
+        cy: (n as f64 - 1.0) / 2.0,
+        k1: 0.0,
+        k2: 0.0,
+        p1: 0.0,
+        p2: 0.0,
+        k3: 0.0,
+    }
+}
+
+fn srgb(frame: &Frame) -> Vec<f32> {
+    frame.rgb.iter().map(|&v| linear_to_srgb(v)).collect()
+}
+
+fn and(a: &[bool], b: &[bool]) -> Vec<bool> {
+    a.iter().zip(b).map(|(x, y)| *x && *y).collect()
+}
+
+#[test]
+fn render_matches_brute_force_shading_times_albedo() {
+    let fx = fixture(smooth_albedo);
+    let pose = pose_at(0.2, 1.0);
+    let psi = vec![
+        psi_at(&pose_at(0.1, 0.0), 1.0),
+        psi_at(&pose_at(0.6, 0.0), 0.5),
+    ];
+    let index = ViewpointIndex::new(&psi);
+    let inputs = RenderInputs {
+        scene: &fx.scene,
+        tri_uv: &fx.tri_uv,
+        texture: &fx.texture,
+        psi: &psi,
+        index: &index,
+    };
+    // A distorted camera: rendering takes any camera.json.
+    let cam = Camera {
+        k1: -0.2,
+        k2: 0.05,
+        ..camera(128, 80.0)
+    };
+    let opts = RenderOptions {
+        shading: ShadingMode::Nearest,
+        ..Default::default()
+    };
+    let (img, mask) = render_view(&inputs, &cam, &pose, &opts).unwrap();
+    // Brute force: the albedo function at the hit point times the nearest Psi (index 0).
+    let g = cast_frame(&fx.scene, &cam, &pose);
+    let mut truth = Frame::new(cam.width, cam.height);
+    let tmask: Vec<bool> = (0..g.tri.len()).map(|i| g.hit(i)).collect();
+    for i in 0..g.tri.len() {
+        if g.hit(i) {
+            let a = smooth_albedo(g.point[i]);
+            let s = psi[0].eval_rgb(g.gamma[i] as f64, g.z[i] as f64);
+            for k in 0..3 {
+                truth.rgb[3 * i + k] = a[k] * s[k] as f32;
+            }
+        }
+    }
+    assert_eq!(mask, tmask);
+    let hits = mask.iter().filter(|&&m| m).count();
+    assert!(hits > 10_000, "{hits}");
+    let psnr = psnr_masked(&srgb(&img), &srgb(&truth), &mask).unwrap();
+    println!("render vs brute force: {psnr:.2} dB over {hits} pixels");
+    assert!(psnr > 50.0, "PSNR {psnr}");
+}
+
+/// RMS difference of the sRGB values over the pixels both cover.
+fn rms(a: &(Frame, Vec<bool>), b: &(Frame, Vec<bool>)) -> f64 {
+    let m = and(&a.1, &b.1);
+    let p = psnr_masked(&srgb(&a.0), &srgb(&b.0), &m).unwrap();
+    10f64.powf(-p / 20.0)
+}
+
+#[test]
+fn mip_mapping_reduces_aliasing_on_distant_grazing_walls() {
+    let fx = fixture(stripes);
+    // Flat shading: only the texture varies.
+    let mut psi = psi_at(&pose_at(0.0, 0.0), 1.0);
+    psi.c = [[0.5; 4]; 3];
+    psi.d = [[1.0; 3]; 3];
+    let psi = vec![psi];
+    let index = ViewpointIndex::new(&psi);
+    let inputs = |tex| RenderInputs {
+        scene: &fx.scene,
+        tri_uv: &fx.tri_uv,
+        texture: tex,
+        psi: &psi,
+        index: &index,
+    };
+    let cam = camera(96, 60.0);
+    let pose = pose_at(0.02, -2.0);
+    let o = |mipmap: bool, supersample: u32| RenderOptions {
+        shading: ShadingMode::Nearest,
+        mipmap,
+        supersample,
+        gain: 1.0,
+    };
+    let reference = render_view(&inputs(&fx.plain), &cam, &pose, &o(false, 8)).unwrap();
+    let no_mip = render_view(&inputs(&fx.plain), &cam, &pose, &o(false, 1)).unwrap();
+    let mip = render_view(&inputs(&fx.texture), &cam, &pose, &o(true, 1)).unwrap();
+    let mip_ss = render_view(&inputs(&fx.texture), &cam, &pose, &o(true, 2)).unwrap();
+    let (e_no, e_mip, e_ss) = (
+        rms(&no_mip, &reference),
+        rms(&mip, &reference),
+        rms(&mip_ss, &reference),
+    );
+    println!("RMS vs 8x8 supersampled: no mips {e_no:.4}, mips {e_mip:.4}, mips + 2x2 {e_ss:.4}");
+    assert!(e_mip < 0.7 * e_no, "mips {e_mip} vs none {e_no}");
+    assert!(e_ss < e_mip, "2x2 {e_ss} vs 1x1 {e_mip}");
+}
+
+#[test]
+fn blending_makes_shading_continuous_while_flying() {
+    let fx = fixture(smooth_albedo);
+    // Fitted viewpoints every 0.1 rad (4 mm) with alternating brightness.
+    let psi: Vec<PsiModel> = (0..12)
+        .map(|i| {
+            psi_at(
+                &pose_at(0.1 * i as f32, 0.0),
+                if i % 2 == 0 { 1.0 } else { 0.6 },
+            )
+        })
+        .collect();
+    let index = ViewpointIndex::new(&psi);
+    let inputs = RenderInputs {
+        scene: &fx.scene,
+        tri_uv: &fx.tri_uv,
+        texture: &fx.texture,
+        psi: &psi,
+        index: &index,
+    };
+    let cam = camera(48, 30.0);
+    let mean_brightness = |shading| -> Vec<f64> {
+        (0..60)
+            .map(|s| {
+                let pose = pose_at(0.25 + 0.005 * s as f32, 0.5);
+                let opts = RenderOptions {
+                    shading,
+                    ..Default::default()
+                };
+                let (img, mask) = render_view(&inputs, &cam, &pose, &opts).unwrap();
+                let n = mask.iter().filter(|&&m| m).count();
+                img.rgb.iter().map(|&v| v as f64).sum::<f64>() / (3 * n) as f64
+            })
+            .collect()
+    };
+    let max_step = |v: &[f64]| {
+        v.windows(2)
+            .map(|w| (w[1] - w[0]).abs() / w[0])
+            .fold(0.0, f64::max)
+    };
+    let near = max_step(&mean_brightness(ShadingMode::Nearest));
+    let blend = max_step(&mean_brightness(ShadingMode::KNearest { k: 4 }));
+    println!("largest relative frame-to-frame change: nearest {near:.4}, 4-nearest {blend:.4}");
+    assert!(
+        near > 0.2,
+        "nearest should jump where the viewpoint switches: {near}"
+    );
+    assert!(blend < 0.05, "blended shading jumps by {blend}");
+}
+
+#[derive(serde::Deserialize)]
+struct SsimRef {
+    width: usize,
+    height: usize,
+    a_srgb_codes: Vec<u8>,
+    b_srgb_codes: Vec<u8>,
+    ssim: f64,
+    psnr_db: f64,
+}
+
+#[test]
+fn ssim_and_psnr_agree_with_skimage() {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/ssim_reference.json"),
+    )
+    .unwrap();
+    let r: SsimRef = serde_json::from_str(&text).unwrap();
+    let a: Vec<f32> = r.a_srgb_codes.iter().map(|&c| c as f32 / 255.0).collect();
+    let b: Vec<f32> = r.b_srgb_codes.iter().map(|&c| c as f32 / 255.0).collect();
+    let mask = vec![true; r.width * r.height];
+    let ssim = ssim_masked(&a, &b, r.width, r.height, &mask).unwrap();
+    let psnr = psnr_masked(&a, &b, &mask).unwrap();
+    println!(
+        "SSIM {ssim} (skimage {}), PSNR {psnr} (skimage {})",
+        r.ssim, r.psnr_db
+    );
+    assert!((ssim - r.ssim).abs() < 1e-4);
+    assert!((psnr - r.psnr_db).abs() < 1e-4);
+}
+
+#[test]
+fn gain_fit_recovers_a_known_scale_exactly() {
+    let (w, h) = (40u32, 30u32);
+    let scale = [0.5f64, 0.8, 0.3];
+    let mut views = Vec::new();
+    let mut truth = Vec::new();
+    for v in 0..3 {
+        let mut f = Frame::new(w, h);
+        let mut mask = vec![false; (w * h) as usize];
+        for i in 0..(w * h) as usize {
+            for k in 0..3 {
+                f.rgb[3 * i + k] = srgb_to_linear(((i * 7 + k * 31 + v * 13) % 200) as f32 / 255.0);
+            }
+            mask[i] = (i % 11) != 0;
+        }
+        let t = Frame {
+            width: w,
+            height: h,
+            rgb: f
+                .rgb
+                .iter()
+                .enumerate()
+                .map(|(i, &x)| (x as f64 * scale[i % 3]) as f32)
+                .collect(),
+        };
+        truth.push(MaskedImage {
+            frame: t,
+            mask: vec![true; (w * h) as usize],
+        });
+        views.push(MaskedImage { frame: f, mask });
+    }
+    let names: Vec<String> = (0..3).map(|v| format!("v{v}.png")).collect();
+    let s = evaluate_methods(&[("m".into(), views)], &truth, &names).unwrap();
+    for k in 0..3 {
+        assert!(
+            (s[0].gain[k] - scale[k]).abs() < 1e-6 * scale[k],
+            "{:?}",
+            s[0].gain
+        );
+    }
+    assert!(s[0].mean_psnr_db > 90.0, "{}", s[0].mean_psnr_db);
+    assert!((s[0].mean_ssim - 1.0).abs() < 1e-9);
+    // Scored pixels: the rendered mask (truth covers all).
+    assert_eq!(
+        s[0].views[0].pixels,
+        (0..1200).filter(|i| i % 11 != 0).count()
+    );
+}
+
+#[test]
+fn baselines_reproduce_a_training_view_and_follow_inverse_square() {
+    let fx = fixture(smooth_albedo);
+    let cam = camera(40, 25.0);
+    let poses = [pose_at(0.1, 0.0), pose_at(0.5, 0.0)];
+    let frames: Vec<Frame> = (0..2)
+        .map(|k| {
+            let mut f = Frame::new(40, 40);
+            for (i, v) in f.rgb.iter_mut().enumerate() {
+                *v = ((i * (k + 3)) % 97) as f32 / 97.0;
+            }
+            f
+        })
+        .collect();
+    let training: Vec<TrainingView> = frames
+        .iter()
+        .zip(&poses)
+        .map(|(frame, p)| TrainingView {
+            frame,
+            camera_to_world: p,
+        })
+        .collect();
+    // Seen from the second training pose itself, (a) is that frame on every hit pixel.
+    let (img, mask) = reproject_nearest_frame(&fx.scene, &cam, &poses[1], &cam, &training).unwrap();
+    let g = cast_frame(&fx.scene, &cam, &poses[1]);
+    let mut n = 0;
+    for i in 0..mask.len() {
+        assert_eq!(mask[i], g.hit(i));
+        if mask[i] {
+            for k in 0..3 {
+                assert!((img.rgb[3 * i + k] - frames[1].rgb[3 * i + k]).abs() < 1e-3);
+            }
+            n += 1;
+        }
+    }
+    assert!(n > 1000);
+    // (b) is gamma / z^2 of the ray cast.
+    let (flat, fmask) = flat_albedo_view(&fx.scene, &cam, &poses[0]);
+    let g = cast_frame(&fx.scene, &cam, &poses[0]);
+    for i in 0..fmask.len() {
+        if fmask[i] {
+            let e = g.gamma[i] / (g.z[i] * g.z[i]);
+            assert!((flat.rgb[3 * i] - e).abs() <= 1e-6 * e);
+        }
+    }
+    let _ = &fx.mesh;
+}
+
+#[test]
+fn views_json_outside_the_output_folder_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    let views = dir.path().join("views.json");
+    let m = "[1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]";
+    for bad in ["/abs.png", "../x.png", "a/../../x.png"] {
+        std::fs::write(
+            &views,
+            format!("{{\"frames\": [{{\"image\": \"{bad}\", \"camera_to_world\": {m}}}]}}"),
+        )
+        .unwrap();
+        let e = read_views(&views, &out).unwrap_err().to_string();
+        assert!(e.contains("views.json") && e.contains(bad), "{e}");
+    }
+    std::fs::write(
+        &views,
+        format!("{{\"frames\": [{{\"image\": \"sub/./v0.png\", \"camera_to_world\": {m}}}]}}"),
+    )
+    .unwrap();
+    let v = read_views(&views, &out).unwrap();
+    assert_eq!(v[0].name, "sub/v0.png");
+    assert_eq!(v[0].path, out.join("sub/v0.png"));
+}
