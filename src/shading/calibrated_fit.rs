@@ -386,13 +386,7 @@ fn fix_gauge(lay: &Layout, p: &mut [f64], reference: usize) {
 
 /// Solve the block of parameters `idx` exactly (the model is linear in each block):
 /// minimise `x^T H x - 2 (H x0 - grad)^T x` with bounds.
-fn block_step(
-    p: &mut [f64],
-    h: &DMatrix<f64>,
-    grad: &DVector<f64>,
-    idx: &[usize],
-    lb: &[f64],
-) {
+fn block_step(p: &mut [f64], h: &DMatrix<f64>, grad: &DVector<f64>, idx: &[usize], lb: &[f64]) {
     let n = idx.len();
     let a = DMatrix::from_fn(n, n, |r, c| h[(idx[r], idx[c])]);
     let x0 = DVector::from_fn(n, |r, _| p[idx[r]]);
@@ -422,7 +416,10 @@ pub(crate) fn solve_box_dyn(a: &DMatrix<f64>, b: &DVector<f64>, lb: &DVector<f64
         let br = DVector::from_fn(m, |r, _| {
             b[free[r]] - fixed.iter().map(|&j| a[(free[r], j)] * lb[j]).sum::<f64>()
         });
-        let scale = (0..m).map(|i| ar[(i, i)].abs()).fold(0.0, f64::max).max(1e-300);
+        let scale = (0..m)
+            .map(|i| ar[(i, i)].abs())
+            .fold(0.0, f64::max)
+            .max(1e-300);
         for i in 0..m {
             ar[(i, i)] += scale * 1e-12;
         }
@@ -451,7 +448,9 @@ pub(crate) fn solve_box_dyn(a: &DMatrix<f64>, b: &DVector<f64>, lb: &DVector<f64
             .filter(|k| mask & (1 << k) != 0)
             .map(|k| bounded[k])
             .collect();
-        let Some(y) = solve_with(&fixed) else { continue };
+        let Some(y) = solve_with(&fixed) else {
+            continue;
+        };
         if bounded.iter().all(|&i| y[i] >= lb[i]) {
             let qy = q(&y);
             if best.as_ref().is_none_or(|(bq, _)| qy < *bq) {
@@ -617,7 +616,8 @@ fn robust_weights(
             let pr = predict(lay, p, &sc, samples, t, albedo, i);
             let ss: f64 = (0..3)
                 .map(|c| {
-                    let e = (f64::from(samples.rgb[c][i]) - pr[c]) / (pr[c].abs() + opts.relative_floor);
+                    let e = (f64::from(samples.rgb[c][i]) - pr[c])
+                        / (pr[c].abs() + opts.relative_floor);
                     e * e
                 })
                 .sum();
@@ -694,5 +694,8 @@ fn residual_rms(
             || ([0.0; 3], 0.0),
             |(a, wa), (b, wb)| ([a[0] + b[0], a[1] + b[1], a[2] + b[2]], wa + wb),
         );
-    (std::array::from_fn(|c| (sums[c] / ws.max(1e-300)).sqrt()), ws)
+    (
+        std::array::from_fn(|c| (sums[c] / ws.max(1e-300)).sqrt()),
+        ws,
+    )
 }

@@ -168,7 +168,13 @@ pub(crate) fn accumulate(
             }
             let g = g
                 .into_iter()
-                .map(|m| DMatrix::from_fn(d1, d1, |r, c| if r <= c { m[r * d1 + c] } else { m[c * d1 + r] }))
+                .map(|m| {
+                    DMatrix::from_fn(
+                        d1,
+                        d1,
+                        |r, c| if r <= c { m[r * d1 + c] } else { m[c * d1 + r] },
+                    )
+                })
                 .collect();
             FrameMoments {
                 g,

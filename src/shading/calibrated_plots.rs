@@ -2,6 +2,9 @@
 //! angular profile s(theta) in degrees, and the per-frame gains. `.svg` paths write SVG,
 //! anything else PNG (as in [`super::plots`]).
 
+// Indexing the channel colour table by channel reads clearer than zips.
+#![allow(clippy::needless_range_loop)]
+
 use super::calibrated::CalibratedModel;
 use super::plots::{render, CURVE_RGB, FONT_NAME};
 use crate::{Error, Result};
@@ -40,12 +43,16 @@ fn draw_rho<DB: DrawingBackend>(
     m: &CalibratedModel,
 ) -> DrawResult<DB> {
     root.fill(&WHITE)?;
-    let curve = |ch: usize| (0..=100).map(move |k| (f64::from(k) / 100.0, m.rho(ch, f64::from(k) / 100.0)));
+    let curve =
+        |ch: usize| (0..=100).map(move |k| (f64::from(k) / 100.0, m.rho(ch, f64::from(k) / 100.0)));
     let hi = (0..3)
         .flat_map(curve)
         .map(|(_, v)| v)
         .fold(1e-9f64, f64::max);
-    let lo = (0..3).flat_map(curve).map(|(_, v)| v).fold(0.0f64, f64::min);
+    let lo = (0..3)
+        .flat_map(curve)
+        .map(|(_, v)| v)
+        .fold(0.0f64, f64::min);
     let mut chart = ChartBuilder::on(root)
         .caption("rho(gamma) per channel", (FONT_NAME, 22))
         .margin(12)
@@ -80,13 +87,12 @@ fn draw_profile<DB: DrawingBackend>(
     let tr: Vec<(f64, f64)> = truth
         .map(|f| pts.iter().map(|&(th, _)| (th, f(th))).collect())
         .unwrap_or_default();
-    let hi = pts
-        .iter()
-        .chain(&tr)
-        .map(|p| p.1)
-        .fold(1.0f64, f64::max);
+    let hi = pts.iter().chain(&tr).map(|p| p.1).fold(1.0f64, f64::max);
     let mut chart = ChartBuilder::on(root)
-        .caption("Light profile s(theta) (1 on the optical axis)", (FONT_NAME, 22))
+        .caption(
+            "Light profile s(theta) (1 on the optical axis)",
+            (FONT_NAME, 22),
+        )
         .margin(12)
         .x_label_area_size(45)
         .y_label_area_size(55)
@@ -99,7 +105,12 @@ fn draw_profile<DB: DrawingBackend>(
         .draw()?;
     if !tr.is_empty() {
         chart
-            .draw_series(DashedLineSeries::new(tr, 6, 4, RGBColor(120, 120, 120).stroke_width(2)))?
+            .draw_series(DashedLineSeries::new(
+                tr,
+                6,
+                4,
+                RGBColor(120, 120, 120).stroke_width(2),
+            ))?
             .label("reference")
             .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RGBColor(120, 120, 120)));
     }
@@ -138,8 +149,16 @@ fn draw_gains<DB: DrawingBackend>(
         .y_desc("gain")
         .label_style((FONT_NAME, 15))
         .draw()?;
-    let pts: Vec<(f64, f64)> = m.gains.iter().enumerate().map(|(f, &g)| (f as f64, g)).collect();
-    chart.draw_series(LineSeries::new(pts.clone(), RGBColor(60, 60, 160).stroke_width(1)))?;
+    let pts: Vec<(f64, f64)> = m
+        .gains
+        .iter()
+        .enumerate()
+        .map(|(f, &g)| (f as f64, g))
+        .collect();
+    chart.draw_series(LineSeries::new(
+        pts.clone(),
+        RGBColor(60, 60, 160).stroke_width(1),
+    ))?;
     chart.draw_series(
         pts.into_iter()
             .map(|p| Circle::new(p, 3, RGBColor(20, 20, 120).filled())),

@@ -1,14 +1,20 @@
 //! Albedo refinement of the calibrated fit: the same surface point seen in several frames has
 //! one albedo, which makes the light identifiable without assuming a uniform albedo.
 //!
-//! Round k: de-light every sample with the current model, `q = (I - a_f) / (g_f rho s / z^2)`;
-//! average q per texel and channel over the samples of that texel (texels seen in fewer than
-//! `min_frames` frames carry no cross-frame information and are left out); normalise so the
-//! weighted mean albedo is 1 per channel (its scale belongs to rho); refit the light with that
-//! per-sample albedo, starting from the current model.
+//! Round k: with the current light shape (rho, s, a_f) fixed, the gains and a per-texel albedo
+//! are solved exactly in the log domain, `log((I - a_f) / (rho s / z^2)) = log g_f + log A_x`:
+//! a weighted least-squares problem whose texel unknowns eliminate in closed form, leaving an
+//! F x F system in the log gains (alternating gains and albedo instead converges like diffusion
+//! along the video, far too slowly: the albedo's slow variation along the airway and the
+//! gains of the frames that see it are tied only through overlaps). Texels seen in fewer than
+//! `min_frames` frames carry no cross-frame information and are left out. The albedo is
+//! normalised to a weighted mean of 1 per channel (its scale belongs to rho) and the light is
+//! refitted with that per-sample albedo, starting from the solved gains.
 
 // Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
 #![allow(clippy::needless_range_loop)]
+// `!(x > t)` on floats is deliberate: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use super::calibrated::CalibratedModel;
 use super::calibrated_fit::{
@@ -16,6 +22,7 @@ use super::calibrated_fit::{
 };
 use super::calibrated_samples::PooledSamples;
 use crate::{Error, Result};
+use nalgebra::{DMatrix, DVector};
 
 /// What one refinement round did.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -66,81 +73,24 @@ pub fn refine_with_texels(
     let mut order: Vec<u32> = (0..samples.len() as u32)
         .filter(|&i| texel[i as usize] != u32::MAX)
         .collect();
-    order.sort_unstable_by_key(|&i| texel[i as usize]);
+    // Stable: within a texel the samples stay in frame order.
+    order.sort_by_key(|&i| texel[i as usize]);
     for _ in 0..rounds {
-        let m = &fit.model;
-        let q: [Vec<f64>; 3] = std::array::from_fn(|c| {
-            (0..samples.len())
-                .map(|i| {
-                    m.delight(
-                        c,
-                        f64::from(samples.rgb[c][i]),
-                        f64::from(samples.gamma[i]),
-                        f64::from(samples.cos_theta[i]),
-                        f64::from(samples.z[i]),
-                        samples.frame[i] as usize,
-                    )
-                    .unwrap_or(f64::NAN)
-                })
-                .collect()
-        });
-        for a in albedo.iter_mut() {
-            a.fill(f32::NAN);
-        }
-        let (mut used, mut texels) = (0usize, 0usize);
-        let mut k = 0;
-        while k < order.len() {
-            let tx = texel[order[k] as usize];
-            let mut e = k;
-            while e < order.len() && texel[order[e] as usize] == tx {
-                e += 1;
-            }
-            let group = &order[k..e];
-            k = e;
-            // Samples are grouped by frame, so distinct frames are counted by changes.
-            let mut frames = 0;
-            let mut last = u32::MAX;
-            for &i in group {
-                let f = samples.frame[i as usize];
-                if f != last {
-                    frames += 1;
-                    last = f;
-                }
-            }
-            if frames < min_frames.max(2) {
-                continue;
-            }
-            // Weighted by the last fit's weights: outliers (highlights) do not set the albedo.
-            let mut acc = [0.0f64; 3];
-            let mut ws = 0.0;
-            for &i in group {
-                let i = i as usize;
-                let w = f64::from(fit.weights[i]);
-                if w > 0.0 && (0..3).all(|c| q[c][i].is_finite()) {
-                    for c in 0..3 {
-                        acc[c] += w * q[c][i];
-                    }
-                    ws += w;
-                }
-            }
-            if !(ws > 0.0) {
-                continue;
-            }
-            texels += 1;
-            for &i in group {
-                for c in 0..3 {
-                    albedo[c][i as usize] = (acc[c] / ws) as f32;
-                }
-                used += 1;
+        let (log_gain, log_albedo, texels) = gains_and_albedo(
+            samples,
+            &order,
+            texel,
+            &fit,
+            opts.reference_frame,
+            min_frames,
+        )?;
+        for c in 0..3 {
+            for i in 0..samples.len() {
+                albedo[c][i] = log_albedo[c][i].exp() as f32;
             }
         }
-        if used == 0 {
-            return Err(Error::Other(format!(
-                "calibrated refinement: no texel is seen in {} frames",
-                min_frames.max(2)
-            )));
-        }
-        // Relative albedo: weighted mean 1 per channel.
+        let used = albedo[0].iter().filter(|a| a.is_finite()).count();
+        // Relative albedo: weighted mean 1 per channel (its scale belongs to rho).
         for c in 0..3 {
             let (s, w) = albedo[c]
                 .iter()
@@ -156,8 +106,13 @@ pub fn refine_with_texels(
                 }
             }
         }
+        // Start the refit from the exact gains of the log-domain solve.
+        let mut start = fit.model.clone();
+        for (g, l) in start.gains.iter_mut().zip(&log_gain) {
+            *g = l.exp();
+        }
         let prev = fit.model.gains.clone();
-        fit = fit_calibrated_with_albedo(samples, density, &albedo, Some(&fit.model), opts)?;
+        fit = fit_calibrated_with_albedo(samples, density, &albedo, Some(&start), opts)?;
         let max_gain_change = fit
             .model
             .gains
@@ -178,4 +133,139 @@ pub fn refine_with_texels(
         albedo,
         rounds: recs,
     })
+}
+
+/// Per-channel log albedo per sample (NaN where its texel is left out).
+type LogAlbedo = [Vec<f64>; 3];
+
+/// The exact log-domain solve of the gains (log, reference 0) and the per-texel albedo given
+/// the light shape of `fit`. Returns (log gains, log albedo per sample, texels used).
+fn gains_and_albedo(
+    samples: &PooledSamples,
+    order: &[u32],
+    texel: &[u32],
+    fit: &CalibratedFit,
+    reference: usize,
+    min_frames: usize,
+) -> Result<(Vec<f64>, LogAlbedo, usize)> {
+    let m = &fit.model;
+    let nf = samples.frames();
+    let floor = 0.01;
+    // Per sample and channel: y = log((I - a) / (rho s / z^2)) and its weight (fit weight x
+    // (I / (I + floor))^2: the log of a dark pixel is noise).
+    let yw = |i: usize, c: usize| -> Option<(f64, f64)> {
+        let w = f64::from(fit.weights[i]);
+        let f = samples.frame[i] as usize;
+        let v = f64::from(samples.rgb[c][i]) - m.ambient_of(f)[c];
+        let shade = m.eval(
+            c,
+            f64::from(samples.gamma[i]),
+            f64::from(samples.cos_theta[i]),
+            f64::from(samples.z[i]),
+            1.0,
+        );
+        (w > 0.0 && v > floor && shade > 0.0).then(|| ((v / shade).ln(), w * v * v))
+    };
+    let mut mat = DMatrix::<f64>::zeros(nf, nf);
+    let mut rhs = DVector::<f64>::zeros(nf);
+    // Per texel: (start, end) in `order` and whether it is used.
+    let mut groups = Vec::new();
+    let mut k = 0;
+    while k < order.len() {
+        let tx = texel[order[k] as usize];
+        let mut e = k;
+        while e < order.len() && texel[order[e] as usize] == tx {
+            e += 1;
+        }
+        groups.push((k, e));
+        k = e;
+    }
+    let mut used_groups = Vec::new();
+    for &(b, e) in &groups {
+        let group = &order[b..e];
+        // Per frame within the texel (samples are in frame order): (frame, W_c, Y_c).
+        let mut per: Vec<(usize, [f64; 3], [f64; 3])> = Vec::new();
+        for &i in group {
+            let i = i as usize;
+            let f = samples.frame[i] as usize;
+            let vals: Vec<Option<(f64, f64)>> = (0..3).map(|c| yw(i, c)).collect();
+            if vals.iter().any(|v| v.is_none()) {
+                continue;
+            }
+            if per.last().is_none_or(|p| p.0 != f) {
+                per.push((f, [0.0; 3], [0.0; 3]));
+            }
+            let p = per.last_mut().expect("pushed above");
+            for (c, v) in vals.iter().enumerate() {
+                let (y, w) = v.expect("checked above");
+                p.1[c] += w;
+                p.2[c] += w * y;
+            }
+        }
+        if per.len() < min_frames.max(2) {
+            continue;
+        }
+        used_groups.push((b, e));
+        for c in 0..3 {
+            let wt: f64 = per.iter().map(|p| p.1[c]).sum();
+            let yt: f64 = per.iter().map(|p| p.2[c]).sum();
+            if !(wt > 0.0) {
+                continue;
+            }
+            for a in &per {
+                mat[(a.0, a.0)] += a.1[c];
+                rhs[a.0] += a.2[c] - a.1[c] * yt / wt;
+                for bb in &per {
+                    mat[(a.0, bb.0)] -= a.1[c] * bb.1[c] / wt;
+                }
+            }
+        }
+    }
+    if used_groups.is_empty() {
+        return Err(Error::Other(format!(
+            "calibrated refinement: no texel is seen in {} frames",
+            min_frames.max(2)
+        )));
+    }
+    // Fix log g_ref = 0: solve on the other frames (a frame sharing no texel keeps its gain).
+    let free: Vec<usize> = (0..nf).filter(|&f| f != reference).collect();
+    let n = free.len();
+    let mut a = DMatrix::from_fn(n, n, |r, c| mat[(free[r], free[c])]);
+    let scale = (0..n).map(|i| a[(i, i)]).fold(0.0, f64::max).max(1e-300);
+    let current: Vec<f64> = m.gains.iter().map(|g| g.ln()).collect();
+    let mut b = DVector::from_fn(n, |r, _| rhs[free[r]]);
+    for r in 0..n {
+        // A tiny ridge towards the current gains keeps an unconnected frame determined.
+        a[(r, r)] += scale * 1e-9;
+        b[r] += scale * 1e-9 * current[free[r]];
+    }
+    let sol = a
+        .cholesky()
+        .ok_or_else(|| Error::Other("calibrated refinement: singular gain system".into()))?
+        .solve(&b);
+    let mut log_gain = vec![0.0; nf];
+    for (r, &f) in free.iter().enumerate() {
+        log_gain[f] = sol[r];
+    }
+    // Texel albedo in closed form given the gains.
+    let mut log_albedo: LogAlbedo = std::array::from_fn(|_| vec![f64::NAN; samples.len()]);
+    for &(b, e) in &used_groups {
+        let group = &order[b..e];
+        for c in 0..3 {
+            let (mut wy, mut ws) = (0.0, 0.0);
+            for &i in group {
+                let i = i as usize;
+                if let Some((y, w)) = yw(i, c) {
+                    wy += w * (y - log_gain[samples.frame[i] as usize]);
+                    ws += w;
+                }
+            }
+            if ws > 0.0 {
+                for &i in group {
+                    log_albedo[c][i as usize] = wy / ws;
+                }
+            }
+        }
+    }
+    Ok((log_gain, log_albedo, used_groups.len()))
 }

@@ -221,7 +221,12 @@ pub fn density_weights_3d(samples: &PooledSamples, opts: &WeightOptions) -> Vec<
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &g| {
             (lo.min(g), hi.max(g))
         });
-    let mut zs: Vec<f32> = samples.z.iter().step_by((n / 100_000).max(1)).copied().collect();
+    let mut zs: Vec<f32> = samples
+        .z
+        .iter()
+        .step_by((n / 100_000).max(1))
+        .copied()
+        .collect();
     let m = zs.len();
     let z_lo = *zs.select_nth_unstable_by(m / 200, |a, b| a.total_cmp(b)).1;
     let z_hi = *zs
@@ -263,8 +268,12 @@ mod tests {
     #[test]
     fn pooling_excludes_subsamples_and_groups_by_frame() {
         let n = 1000;
-        let gamma: Vec<f32> = (0..n).map(|i| if i % 10 == 0 { 0.01 } else { 0.5 }).collect();
-        let z: Vec<f32> = (0..n).map(|i| if i % 10 == 1 { 0.0 } else { 10.0 }).collect();
+        let gamma: Vec<f32> = (0..n)
+            .map(|i| if i % 10 == 0 { 0.01 } else { 0.5 })
+            .collect();
+        let z: Vec<f32> = (0..n)
+            .map(|i| if i % 10 == 1 { 0.0 } else { 10.0 })
+            .collect();
         let ct = vec![0.9f32; n];
         let rgb: Vec<f32> = (0..3 * n)
             .map(|k| if (k / 3) % 10 == 2 { 1.0 } else { 0.3 })

@@ -54,10 +54,11 @@ pub fn cone_profile(theta_deg: f64) -> f64 {
 /// Base mucosa colour (the albedo's typical value).
 pub const BASE_ALBEDO: [f64; 3] = [0.78, 0.40, 0.34];
 
-/// Albedo at axial position z and angle phi around the tube.
-pub fn albedo(z: f64, phi: f64) -> [f64; 3] {
+/// Albedo at axial position z and angle phi around the tube; `slow_amplitude` is the relative
+/// amplitude of its slow variation (period about 30 mm along the airway).
+pub fn albedo(z: f64, phi: f64, slow_amplitude: f64) -> [f64; 3] {
     let arc = phi * A0;
-    let slow = 1.0 + 0.08 * (0.21 * z + 0.9 * phi.sin()).sin();
+    let slow = 1.0 + slow_amplitude * (0.21 * z + 0.9 * phi.sin()).sin();
     let v1 = ((0.9 * z + 1.5 * (0.3 * arc).sin()) * 1.3).sin().abs();
     let v2 = ((0.55 * arc + 1.2 * (0.25 * z).sin()) * 1.1).sin().abs();
     let vessel = v1 < 0.07 || v2 < 0.05;
@@ -115,13 +116,18 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 impl View {
     /// Looking along (tan yaw, tan pitch, 1), rolled about the optical axis.
     pub fn new(eye: [f64; 3], yaw_deg: f64, pitch_deg: f64, roll_deg: f64, gain: f64) -> View {
-        let zc = normalize([yaw_deg.to_radians().tan(), pitch_deg.to_radians().tan(), 1.0]);
+        let zc = normalize([
+            yaw_deg.to_radians().tan(),
+            pitch_deg.to_radians().tan(),
+            1.0,
+        ]);
         let x0 = normalize(cross([0.0, 1.0, 0.0], zc));
         let y0 = cross(zc, x0);
         let (s, c) = roll_deg.to_radians().sin_cos();
         let xc = std::array::from_fn(|k| c * x0[k] + s * y0[k]);
         let yc = std::array::from_fn(|k| -s * x0[k] + c * y0[k]);
-        let rot = std::array::from_fn(|r| [[xc, yc, zc][0][r], [xc, yc, zc][1][r], [xc, yc, zc][2][r]]);
+        let rot =
+            std::array::from_fn(|r| [[xc, yc, zc][0][r], [xc, yc, zc][1][r], [xc, yc, zc][2][r]]);
         View { eye, rot, gain }
     }
 }
@@ -175,6 +181,8 @@ pub struct RenderOptions {
     pub power: f64,
     /// Uniform inter-reflected irradiance, as a fraction of the direct irradiance at 10 mm on axis.
     pub ambient: f64,
+    /// Relative amplitude of the albedo's slow variation along and around the airway.
+    pub slow_albedo: f64,
 }
 
 impl Default for RenderOptions {
@@ -184,6 +192,7 @@ impl Default for RenderOptions {
             fov_deg: 100.0,
             power: 90.0,
             ambient: 0.0,
+            slow_albedo: 0.08,
         }
     }
 }
@@ -248,7 +257,7 @@ pub fn render(view: &View, opts: &RenderOptions, seed: u64) -> Frame {
                 ]);
                 let g = d[0] * grad[0] + d[1] * grad[1] + d[2] * grad[2];
                 let phi = (p[1] / B0).atan2(p[0] / A0);
-                let alb = albedo(p[2], phi);
+                let alb = albedo(p[2], phi, opts.slow_albedo);
                 fr.gamma[i] = g as f32;
                 fr.z[i] = t as f32;
                 let ti = (p[2] / TEXEL_MM).floor() as u32;
