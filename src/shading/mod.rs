@@ -30,7 +30,9 @@ pub use calibrated_fit::{
 };
 pub use calibrated_predict::{cos_theta_of, fit_gain, predict_frame, predict_pixels, psnr, Albedo};
 pub use calibrated_refine::{refine_with_texels, RefineRound, RefinedFit};
-pub use calibrated_samples::{density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples};
+pub use calibrated_samples::{
+    density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples,
+};
 pub use fit::{fit_psi, ChannelFit, FitOptions, PsiFit, Robust};
 pub use psi::PsiModel;
 pub use samples::{extract_samples, ExclusionCounts, SampleOptions, SampleSet};
