@@ -4,8 +4,19 @@
 //! weighs them inversely to their density in (gamma, z), [`fit_psi`] fits
 //! `Psi(gamma, z) = rho(gamma) * varrho(z)` per channel, giving a [`PsiModel`] (serialised in
 //! `shading.json`). [`plots`] draws the paper's Fig. 2.
+//!
+//! Beyond the paper, [`calibrated`]: one light model for the whole video (rho(gamma), the
+//! light's angular profile s(theta), absolute 1/z², a gain per frame), fitted on samples pooled
+//! over all frames by [`fit_calibrated`] / [`refine_with_texels`]; [`calibrated_plots`] draws it.
 
 pub mod bernstein;
+pub mod calibrated;
+pub mod calibrated_fit;
+mod calibrated_moments;
+pub mod calibrated_plots;
+pub mod calibrated_predict;
+pub mod calibrated_refine;
+pub mod calibrated_samples;
 pub mod fit;
 mod moments;
 pub mod plots;
@@ -13,6 +24,15 @@ pub mod psi;
 pub mod samples;
 pub mod weights;
 
+pub use calibrated::CalibratedModel;
+pub use calibrated_fit::{
+    fit_calibrated, fit_calibrated_with_albedo, CalibratedFit, CalibratedOptions, CalibratedReport,
+};
+pub use calibrated_predict::{cos_theta_of, fit_gain, predict_frame, predict_pixels, psnr, Albedo};
+pub use calibrated_refine::{refine_with_texels, RefineRound, RefinedFit};
+pub use calibrated_samples::{
+    density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples,
+};
 pub use fit::{fit_psi, ChannelFit, FitOptions, PsiFit, Robust};
 pub use psi::PsiModel;
 pub use samples::{extract_samples, ExclusionCounts, SampleOptions, SampleSet};

@@ -17,9 +17,9 @@ use std::sync::Once;
 
 /// Embedded so plots need no system fonts (DejaVu Sans, see assets/DejaVuSans-LICENSE).
 static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
-const FONT_NAME: &str = "sans-serif";
+pub(crate) const FONT_NAME: &str = "sans-serif";
 
-fn register_font() {
+pub(crate) fn register_font() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         // The embedded font is known good; a failure would only lose text, not the plot.
@@ -33,7 +33,7 @@ const POINT_RGB: [RGBColor; 3] = [
     RGBColor(40, 170, 60),
     RGBColor(50, 90, 230),
 ];
-const CURVE_RGB: [RGBColor; 3] = [
+pub(crate) const CURVE_RGB: [RGBColor; 3] = [
     RGBColor(120, 0, 0),
     RGBColor(0, 90, 10),
     RGBColor(0, 20, 120),
@@ -48,8 +48,8 @@ fn stride(n: usize, max: usize) -> impl Iterator<Item = usize> {
 /// Draw with `$draw(root)` on an SVG or a PNG backend, chosen by the path's extension.
 macro_rules! render {
     ($path:expr, $size:expr, $draw:expr) => {{
-        register_font();
-        let path: &Path = $path;
+        $crate::shading::plots::register_font();
+        let path: &std::path::Path = $path;
         let size: (u32, u32) = $size;
         let plot_err = |e: String| Error::Other(format!("{}: plot failed: {e}", path.display()));
         if path
@@ -67,10 +67,11 @@ macro_rules! render {
                 $draw(&root).map_err(|e| plot_err(e.to_string()))?;
                 root.present().map_err(|e| plot_err(e.to_string()))?;
             }
-            write_png(path, size, &buf)
+            $crate::shading::plots::write_png(path, size, &buf)
         }
     }};
 }
+pub(crate) use render;
 
 /// Fig. 2a: every sample as a faint dot at (gamma, z mm), so overlapping dots show density.
 pub fn plot_samples_density(samples: &SampleSet, path: &Path) -> Result<()> {
@@ -199,7 +200,7 @@ fn draw_slices<DB: DrawingBackend>(
     Ok(())
 }
 
-fn write_png(path: &Path, size: (u32, u32), rgb: &[u8]) -> Result<()> {
+pub(crate) fn write_png(path: &Path, size: (u32, u32), rgb: &[u8]) -> Result<()> {
     let file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), size.0, size.1);
     enc.set_color(png::ColorType::Rgb);

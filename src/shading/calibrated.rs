@@ -1,0 +1,280 @@
+//! The calibrated light model: one light for the whole video (DESIGN.md, "Beyond the paper").
+//!
+//! `I_f(pixel) = g_f * albedo(x) * rho_ch(gamma) * s(theta) / z^2 (+ a_f,ch)`:
+//! rho per colour channel is a Bernstein polynomial in gamma over [0, 1] (it holds the BRDF,
+//! the specular lobe included: with the light at the lens the lobe depends on gamma alone, and
+//! the mean albedo); s is the light's angular profile times the lens vignetting, a Bernstein
+//! polynomial in cos(theta) shared by the channels with s = 1 on the optical axis; z is the
+//! absolute distance (mm, never normalised or clamped); g_f is the frame's auto-exposure gain
+//! (1 for the reference frame); a_f the optional inter-reflected light of frame f.
+
+use serde::{Deserialize, Serialize};
+
+/// The Bernstein basis `B_i^n(t)`, `i = 0..=n`, of degree `n = out.len() - 1`, written into `out`.
+#[inline]
+pub(crate) fn basis_into(t: f64, out: &mut [f64]) {
+    let n = out.len() - 1;
+    let s = 1.0 - t;
+    let mut tp = 1.0;
+    for o in out.iter_mut() {
+        *o = tp;
+        tp *= t;
+    }
+    let mut sp = 1.0;
+    for o in out.iter_mut().rev() {
+        *o *= sp;
+        sp *= s;
+    }
+    let mut binom = 1.0;
+    for (i, o) in out.iter_mut().enumerate() {
+        *o *= binom;
+        binom = binom * (n - i) as f64 / (i + 1) as f64;
+    }
+}
+
+/// `sum_i coeffs[i] B_i^n(t)` with `n = coeffs.len() - 1` (de Casteljau: stable, allocation free
+/// for degrees up to 15).
+#[inline]
+pub fn bernstein_eval(coeffs: &[f64], t: f64) -> f64 {
+    let n = coeffs.len();
+    debug_assert!((1..=16).contains(&n));
+    let mut b = [0.0f64; 16];
+    b[..n].copy_from_slice(coeffs);
+    for k in (1..n).rev() {
+        for i in 0..k {
+            b[i] = b[i] * (1.0 - t) + b[i + 1] * t;
+        }
+    }
+    b[0]
+}
+
+/// The fitted calibrated light model, as stored under "calibrated" in `shading.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CalibratedModel {
+    /// rho per channel R, G, B: Bernstein coefficients in gamma over [0, 1] (degree = length - 1).
+    /// Unit: linear intensity x mm² at the reference gain (the inverse-square falloff is
+    /// explicit, so rho carries the light's power and the mean albedo).
+    pub rho: [Vec<f64>; 3],
+    /// s: Bernstein coefficients in `t = (1 - cos theta) / (1 - cos_theta_edge)`, i.e. linear in
+    /// cos theta; `s[0] = 1` (s = 1 on the optical axis). Unitless.
+    pub s: Vec<f64>,
+    /// cos of the largest off-axis angle the fit saw (t = 1). s is held constant beyond it
+    /// (never extrapolated). Unitless, in (-1, 1).
+    pub cos_theta_edge: f64,
+    /// Gain g_f per fitted frame (unitless), `gains[reference_frame] = 1`.
+    pub gains: Vec<f64>,
+    /// Index of the frame whose gain is fixed to 1.
+    pub reference_frame: usize,
+    /// Inter-reflected light a_f per fitted frame and channel (linear intensity at that frame's
+    /// gain), when the fit kept it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ambient: Option<Vec<[f64; 3]>>,
+    /// Weighted RMS residual per channel over the fitted samples (linear intensity), with the
+    /// final fit weights (density x robust).
+    pub rms_residual: [f64; 3],
+    /// Samples the fit used.
+    pub samples_used: usize,
+}
+
+impl CalibratedModel {
+    /// The normalised angle coordinate t of `cos_theta` (0 on the axis, 1 at the edge),
+    /// clamped to [0, 1].
+    #[inline]
+    pub fn t(&self, cos_theta: f64) -> f64 {
+        ((1.0 - cos_theta) / (1.0 - self.cos_theta_edge)).clamp(0.0, 1.0)
+    }
+
+    /// `rho(gamma)` of channel `ch` (0 = R, 1 = G, 2 = B), linear intensity x mm².
+    #[inline]
+    pub fn rho(&self, ch: usize, gamma: f64) -> f64 {
+        bernstein_eval(&self.rho[ch], gamma)
+    }
+
+    /// `s(theta)` given `cos_theta` of the pixel's ray off the optical axis (unitless, 1 on axis).
+    #[inline]
+    pub fn s(&self, cos_theta: f64) -> f64 {
+        bernstein_eval(&self.s, self.t(cos_theta))
+    }
+
+    /// Largest off-axis angle the fit saw (degrees).
+    pub fn theta_edge_deg(&self) -> f64 {
+        self.cos_theta_edge.clamp(-1.0, 1.0).acos().to_degrees()
+    }
+
+    /// `gain * rho_ch(gamma) * s(theta) / z^2` (linear intensity), z in mm. Uniform albedo
+    /// (folded into rho); no ambient term.
+    #[inline]
+    pub fn eval(&self, ch: usize, gamma: f64, cos_theta: f64, z: f64, gain: f64) -> f64 {
+        gain * self.rho(ch, gamma) * self.s(cos_theta) / (z * z)
+    }
+
+    /// [`eval`](Self::eval) for R, G, B at once.
+    #[inline]
+    pub fn eval_rgb(&self, gamma: f64, cos_theta: f64, z: f64, gain: f64) -> [f64; 3] {
+        let k = gain * self.s(cos_theta) / (z * z);
+        std::array::from_fn(|ch| k * self.rho(ch, gamma))
+    }
+
+    /// The shading of fitted frame `frame` in channel `ch`: its gain, and its ambient term if any.
+    /// `None` when `frame` was not fitted.
+    pub fn eval_frame(
+        &self,
+        ch: usize,
+        gamma: f64,
+        cos_theta: f64,
+        z: f64,
+        frame: usize,
+    ) -> Option<f64> {
+        let g = *self.gains.get(frame)?;
+        Some(self.eval(ch, gamma, cos_theta, z, g) + self.ambient_of(frame)[ch])
+    }
+
+    /// a_f of fitted frame `frame` (zeros without an ambient term or for an unknown frame).
+    pub fn ambient_of(&self, frame: usize) -> [f64; 3] {
+        self.ambient
+            .as_ref()
+            .and_then(|a| a.get(frame).copied())
+            .unwrap_or([0.0; 3])
+    }
+
+    /// The ambient term for a new view at the reference gain: the median over fitted frames
+    /// of `a_f / g_f` per channel (zeros without an ambient term).
+    pub fn new_view_ambient(&self) -> [f64; 3] {
+        let Some(a) = &self.ambient else {
+            return [0.0; 3];
+        };
+        std::array::from_fn(|ch| {
+            let mut v: Vec<f64> = a
+                .iter()
+                .zip(&self.gains)
+                .map(|(a, g)| a[ch] / g.max(1e-300))
+                .collect();
+            if v.is_empty() {
+                return 0.0;
+            }
+            let mid = v.len() / 2;
+            *v.select_nth_unstable_by(mid, |x, y| x.total_cmp(y)).1
+        })
+    }
+
+    /// The albedo (relative to the mean albedo folded into rho) that de-lights `value` (linear
+    /// intensity) seen in fitted frame `frame`: `(value - a_f) / (g_f rho s / z^2)`.
+    /// `None` for an unknown frame or a non-positive shading.
+    pub fn delight(
+        &self,
+        ch: usize,
+        value: f64,
+        gamma: f64,
+        cos_theta: f64,
+        z: f64,
+        frame: usize,
+    ) -> Option<f64> {
+        let g = *self.gains.get(frame)?;
+        let shade = self.eval(ch, gamma, cos_theta, z, g);
+        (shade > 0.0).then(|| (value - self.ambient_of(frame)[ch]) / shade)
+    }
+
+    /// Check the invariants a loaded model must hold; the message says which field is wrong.
+    pub fn validate(&self) -> Result<(), String> {
+        for (ch, r) in self.rho.iter().enumerate() {
+            if r.is_empty() || r.len() > 16 || r.iter().any(|v| !v.is_finite()) {
+                return Err(format!(
+                    "calibrated.rho[{ch}]: expected 1..16 finite coefficients, got {:?}",
+                    r
+                ));
+            }
+        }
+        if self.s.is_empty() || self.s.len() > 16 || self.s.iter().any(|v| !v.is_finite()) {
+            return Err(format!(
+                "calibrated.s: expected 1..16 finite coefficients, got {:?}",
+                self.s
+            ));
+        }
+        if self.s[0] != 1.0 {
+            return Err(format!(
+                "calibrated.s[0] is {}, must be 1 (s = 1 on the axis)",
+                self.s[0]
+            ));
+        }
+        if !(self.cos_theta_edge > -1.0 && self.cos_theta_edge < 1.0) {
+            return Err(format!(
+                "calibrated.cos_theta_edge is {}, must be in (-1, 1)",
+                self.cos_theta_edge
+            ));
+        }
+        if self.gains.iter().any(|g| !(g.is_finite() && *g > 0.0)) {
+            return Err("calibrated.gains: every gain must be finite and > 0".into());
+        }
+        if self.reference_frame >= self.gains.len().max(1) {
+            return Err(format!(
+                "calibrated.reference_frame {} is out of range ({} gains)",
+                self.reference_frame,
+                self.gains.len()
+            ));
+        }
+        if let Some(a) = &self.ambient {
+            if a.len() != self.gains.len() {
+                return Err(format!(
+                    "calibrated.ambient has {} entries for {} gains",
+                    a.len(),
+                    self.gains.len()
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shading::bernstein::bernstein;
+
+    #[test]
+    fn general_basis_matches_formula_and_eval() {
+        for n in 0..7usize {
+            let mut b = vec![0.0; n + 1];
+            let coeffs: Vec<f64> = (0..=n).map(|i| 0.3 + 0.1 * i as f64).collect();
+            for k in 0..=10 {
+                let t = f64::from(k) / 10.0;
+                basis_into(t, &mut b);
+                let mut direct = 0.0;
+                for i in 0..=n {
+                    let e = bernstein(n as u32, i as u32, t);
+                    assert!((b[i] - e).abs() < 1e-14, "n {n} i {i} t {t}");
+                    direct += coeffs[i] * e;
+                }
+                assert!((bernstein_eval(&coeffs, t) - direct).abs() < 1e-14);
+            }
+        }
+    }
+
+    #[test]
+    fn eval_is_inverse_square_and_one_on_axis() {
+        let m = CalibratedModel {
+            rho: [vec![0.0, 10.0, 20.0, 30.0], vec![1.0; 4], vec![2.0; 2]],
+            s: vec![1.0, 0.8, 0.5, 0.2],
+            cos_theta_edge: 0.5,
+            gains: vec![1.0, 2.0],
+            reference_frame: 0,
+            ambient: Some(vec![[0.0; 3], [0.01, 0.02, 0.03]]),
+            rms_residual: [0.0; 3],
+            samples_used: 0,
+        };
+        m.validate().unwrap();
+        // On the axis s = 1; at gamma = 1 rho_R = 30; z = 10 mm → 0.3.
+        assert!((m.eval(0, 1.0, 1.0, 10.0, 1.0) - 0.3).abs() < 1e-15);
+        assert!((m.eval(0, 1.0, 1.0, 20.0, 1.0) - 0.075).abs() < 1e-15);
+        // At the edge (cos = 0.5) s = 0.2; beyond it clamped.
+        assert!((m.s(0.5) - 0.2).abs() < 1e-15);
+        assert_eq!(m.s(0.1), m.s(0.5));
+        // Frame 1: gain 2 plus ambient; delight inverts it.
+        let v = m.eval_frame(2, 0.4, 0.9, 7.0, 1).unwrap();
+        assert!((v - (2.0 * 2.0 * m.s(0.9) / 49.0 + 0.03)).abs() < 1e-15);
+        assert!((m.delight(2, v, 0.4, 0.9, 7.0, 1).unwrap() - 1.0).abs() < 1e-12);
+        assert_eq!(m.new_view_ambient()[1], 0.01);
+        let json = serde_json::to_string(&m).unwrap();
+        let back: CalibratedModel = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, m);
+    }
+}

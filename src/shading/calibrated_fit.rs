@@ -1,0 +1,701 @@
+//! The pooled fit of the calibrated light model over all frames.
+//!
+//! Steps: (1) one pass over the samples builds per-frame moments (`calibrated_moments`);
+//! (2) alternate exact linear solves from s ≡ 1, g ≡ 1, a ≡ 0: rho per channel given s, g, a;
+//! s (with s = 1 on the axis eliminated) given rho, g, a; g_f and a_f per frame given rho, s
+//! (a 1x1 or 4x4 system each); after each round the reference frame's gain is fixed to 1 by
+//! moving the scale into rho; (3) a joint Levenberg–Marquardt polish over every parameter
+//! (dense Gauss–Newton matrix, a few hundred parameters); (4) robust IRLS: Tukey or Huber
+//! weights on each sample's relative residual, shared by the channels (vessels and
+//! highlights are relative outliers at any brightness), multiply the density weights and
+//! 1–3 repeat; (5) positivity: rho and s are checked on grids over [0, 1]; if either goes
+//! non-positive the fit is redone with all Bernstein coefficients >= a small positive bound.
+//! Gains are always kept > 0 and ambient terms >= 0 (light only adds).
+//!
+//! The albedo is unknown. [`fit_calibrated`] assumes its low-frequency mean is uniform (the
+//! paper's assumption; the mean folds into rho and the robust weights discount vessels).
+//! [`refine_with_texels`] then alternates: de-light every sample with the current light,
+//! average the de-lit values per texel (surface points seen in several frames share one
+//! albedo), refit the light with that per-sample albedo.
+
+// Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
+#![allow(clippy::needless_range_loop)]
+// `!(x > t)` on floats is deliberate: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use super::calibrated::{bernstein_eval, CalibratedModel};
+use super::calibrated_moments::{accumulate, cost, normal_equations, t_of, FrameMoments, Layout};
+use super::calibrated_samples::PooledSamples;
+use super::fit::Robust;
+use crate::{Error, Result};
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+
+/// Options of [`fit_calibrated`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibratedOptions {
+    /// Degree of rho(gamma) per channel (the paper's cubic: 3). 0..=9.
+    pub rho_degree: usize,
+    /// Degree of s in cos theta. 0 (s ≡ 1) ..= 9. Default 3.
+    pub s_degree: usize,
+    /// Fit an inter-reflection term a_f per frame and channel. Default false.
+    pub ambient: bool,
+    /// Frame whose gain is fixed to 1. Default 0.
+    pub reference_frame: usize,
+    /// Most alternation rounds (each: rho, s, gains). Default 40.
+    pub max_alternations: usize,
+    /// Stop alternating / polishing when the cost falls by less than this fraction. Default 1e-10.
+    pub tolerance: f64,
+    /// Joint Levenberg–Marquardt polish after the alternation. Default true.
+    pub lm_polish: bool,
+    /// Most LM iterations. Default 60.
+    pub max_lm_iterations: usize,
+    /// Robust loss on the relative residuals. Default Tukey(4.685).
+    pub robust: Robust,
+    /// Most IRLS re-weightings (stops earlier once no parameter moves by 1e-4 of itself). Default 8.
+    pub max_irls_iterations: usize,
+    /// Linear intensity added to |prediction| when forming relative residuals (keeps dark
+    /// pixels from dominating the robust scale). Default 0.01.
+    pub relative_floor: f64,
+    /// Points of the positivity grids over gamma and t in [0, 1]. Default 65.
+    pub positivity_grid: usize,
+    /// Refit with non-negative Bernstein coefficients when rho or s goes non-positive. Default true.
+    pub enforce_positivity: bool,
+}
+
+impl Default for CalibratedOptions {
+    fn default() -> Self {
+        CalibratedOptions {
+            rho_degree: 3,
+            s_degree: 3,
+            ambient: false,
+            reference_frame: 0,
+            max_alternations: 40,
+            tolerance: 1e-10,
+            lm_polish: true,
+            max_lm_iterations: 60,
+            robust: Robust::Tukey(4.685),
+            max_irls_iterations: 8,
+            relative_floor: 0.01,
+            positivity_grid: 65,
+            enforce_positivity: true,
+        }
+    }
+}
+
+/// How the fit went.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CalibratedReport {
+    /// Alternation rounds (summed over IRLS rounds).
+    pub alternations: usize,
+    /// Accepted LM steps (summed).
+    pub lm_steps: usize,
+    /// IRLS re-weightings performed.
+    pub irls_iterations: usize,
+    /// True when the positivity-constrained fit replaced the unconstrained one.
+    pub constrained: bool,
+    /// Final weighted cost `sum w (I - model)^2` over channels (final weights).
+    pub cost: f64,
+    /// Fraction of the density weight the robust weights removed (0: none).
+    pub downweighted: f64,
+}
+
+/// The fitted model, the report and the final per-sample weights (density x robust).
+#[derive(Debug, Clone)]
+pub struct CalibratedFit {
+    /// The model.
+    pub model: CalibratedModel,
+    /// How the fit went.
+    pub report: CalibratedReport,
+    /// Final weight per sample (density x robust; 0 for samples left out).
+    pub weights: Vec<f32>,
+}
+
+/// Fit the calibrated model to pooled samples with per-sample density weights, assuming a
+/// uniform albedo (folded into rho).
+pub fn fit_calibrated(
+    samples: &PooledSamples,
+    density: &[f32],
+    opts: &CalibratedOptions,
+) -> Result<CalibratedFit> {
+    fit_inner(samples, density, None, None, opts)
+}
+
+/// Fit with a known per-sample albedo per channel (relative to its mean, which folds into
+/// rho; NaN or <= 0: sample left out), starting from `init` if given (same degrees).
+pub fn fit_calibrated_with_albedo(
+    samples: &PooledSamples,
+    density: &[f32],
+    albedo: &[Vec<f32>; 3],
+    init: Option<&CalibratedModel>,
+    opts: &CalibratedOptions,
+) -> Result<CalibratedFit> {
+    if albedo.iter().any(|a| a.len() != samples.len()) {
+        return Err(Error::Other(format!(
+            "calibrated fit: albedo for {} samples, expected {}",
+            albedo[0].len(),
+            samples.len()
+        )));
+    }
+    fit_inner(samples, density, Some(albedo), init, opts)
+}
+
+fn check_inputs(samples: &PooledSamples, density: &[f32], opts: &CalibratedOptions) -> Result<()> {
+    let f = samples.frames();
+    let need = 3 * (opts.rho_degree + 1) + opts.s_degree + f * if opts.ambient { 4 } else { 1 };
+    if samples.len() < need {
+        return Err(Error::Other(format!(
+            "calibrated fit: {} samples for {need} parameters",
+            samples.len()
+        )));
+    }
+    if opts.rho_degree > 9 || opts.s_degree > 9 {
+        return Err(Error::Other(format!(
+            "calibrated fit: degrees rho {} / s {} (at most 9)",
+            opts.rho_degree, opts.s_degree
+        )));
+    }
+    if opts.reference_frame >= f {
+        return Err(Error::Other(format!(
+            "calibrated fit: reference frame {} of {f} frames",
+            opts.reference_frame
+        )));
+    }
+    if density.len() != samples.len() {
+        return Err(Error::Other(format!(
+            "calibrated fit: {} weights for {} samples",
+            density.len(),
+            samples.len()
+        )));
+    }
+    if let Some(i) = density.iter().position(|w| !(w.is_finite() && *w >= 0.0)) {
+        return Err(Error::Other(format!(
+            "calibrated fit: weight {i} is {} (weights must be finite and >= 0)",
+            density[i]
+        )));
+    }
+    if let Some(f) = (0..f).find(|&f| samples.frame_start[f] == samples.frame_start[f + 1]) {
+        return Err(Error::Other(format!(
+            "calibrated fit: frame {f} has no samples (its gain is undetermined)"
+        )));
+    }
+    Ok(())
+}
+
+fn fit_inner(
+    samples: &PooledSamples,
+    density: &[f32],
+    albedo: Option<&[Vec<f32>; 3]>,
+    init: Option<&CalibratedModel>,
+    opts: &CalibratedOptions,
+) -> Result<CalibratedFit> {
+    check_inputs(samples, density, opts)?;
+    let lay = Layout {
+        nr: opts.rho_degree + 1,
+        ns: opts.s_degree + 1,
+        frames: samples.frames(),
+        ambient: opts.ambient,
+    };
+    let cos_edge = match init {
+        Some(m) => m.cos_theta_edge,
+        None => samples.min_cos_theta().min(1.0 - 1e-6),
+    };
+    let t = t_of(samples, cos_edge);
+    let base: Vec<f32> = (0..samples.len())
+        .map(|i| match albedo {
+            Some(a) if !(0..3).all(|c| a[c][i] > 0.0) => 0.0,
+            _ => density[i],
+        })
+        .collect();
+    let mut p = match init {
+        Some(m) => params_of(&lay, m)?,
+        None => initial(&lay),
+    };
+    let mut rep = CalibratedReport::default();
+    let mut w = base.clone();
+    let mut constrained = false;
+    for round in 0..=opts.max_irls_iterations {
+        let m = accumulate(samples, &t, &w, albedo, &lay);
+        let scale = rho_scale(&m);
+        let prev = p.clone();
+        if !constrained {
+            p = solve(&lay, &m, p, opts, None, &mut rep);
+            if opts.enforce_positivity && !(min_positive(&lay, &p, opts.positivity_grid) > 0.0) {
+                constrained = true;
+                rep.constrained = true;
+            }
+        }
+        if constrained {
+            clamp_to(&lay, &mut p, Some(bounds(scale)));
+            p = solve(&lay, &m, p, opts, Some(bounds(scale)), &mut rep);
+        }
+        if matches!(opts.robust, Robust::None) || round == opts.max_irls_iterations {
+            rep.cost = cost(&lay, &m, &p);
+            break;
+        }
+        let change = (0..p.len())
+            .map(|k| (p[k] - prev[k]).abs() / (prev[k].abs() + 1e-3))
+            .fold(0.0, f64::max);
+        if round > 0 && change < 1e-4 {
+            rep.cost = cost(&lay, &m, &p);
+            break;
+        }
+        rep.irls_iterations += 1;
+        w = robust_weights(samples, &t, &base, albedo, &lay, &p, opts);
+    }
+    let (rms, _) = residual_rms(samples, &t, &w, albedo, &lay, &p);
+    let wsum_base: f64 = base.iter().map(|&x| f64::from(x)).sum();
+    let wsum: f64 = w.iter().map(|&x| f64::from(x)).sum();
+    rep.downweighted = 1.0 - wsum / wsum_base.max(1e-300);
+    let model = model_of(&lay, &p, cos_edge, opts.reference_frame, rms, samples.len());
+    Ok(CalibratedFit {
+        model,
+        report: rep,
+        weights: w,
+    })
+}
+
+/// rho ≡ 0, s ≡ 1, g ≡ 1, a ≡ 0.
+fn initial(lay: &Layout) -> Vec<f64> {
+    let mut p = vec![0.0; lay.len()];
+    for k in 1..lay.ns {
+        p[lay.e_off() + k - 1] = 1.0;
+    }
+    for f in 0..lay.frames {
+        p[lay.g_off() + f] = 1.0;
+    }
+    p
+}
+
+fn params_of(lay: &Layout, m: &CalibratedModel) -> Result<Vec<f64>> {
+    if m.rho.iter().any(|r| r.len() != lay.nr)
+        || m.s.len() != lay.ns
+        || m.gains.len() != lay.frames
+        || (lay.ambient && m.ambient.as_ref().is_none_or(|a| a.len() != lay.frames))
+    {
+        return Err(Error::Other(
+            "calibrated fit: the initial model's degrees, frames or ambient terms differ from the options"
+                .into(),
+        ));
+    }
+    let mut p = vec![0.0; lay.len()];
+    for c in 0..3 {
+        p[lay.c_off(c)..lay.c_off(c) + lay.nr].copy_from_slice(&m.rho[c]);
+    }
+    p[lay.e_off()..lay.e_off() + lay.ns - 1].copy_from_slice(&m.s[1..]);
+    p[lay.g_off()..lay.g_off() + lay.frames].copy_from_slice(&m.gains);
+    if lay.ambient {
+        for (f, a) in m.ambient.as_ref().into_iter().flatten().enumerate() {
+            p[lay.a_off() + 3 * f..lay.a_off() + 3 * f + 3].copy_from_slice(a);
+        }
+    }
+    Ok(p)
+}
+
+fn model_of(
+    lay: &Layout,
+    p: &[f64],
+    cos_edge: f64,
+    reference: usize,
+    rms: [f64; 3],
+    n: usize,
+) -> CalibratedModel {
+    let mut s = vec![1.0];
+    s.extend_from_slice(&p[lay.e_off()..lay.e_off() + lay.ns - 1]);
+    CalibratedModel {
+        rho: std::array::from_fn(|c| p[lay.c_off(c)..lay.c_off(c) + lay.nr].to_vec()),
+        s,
+        cos_theta_edge: cos_edge,
+        gains: p[lay.g_off()..lay.g_off() + lay.frames].to_vec(),
+        reference_frame: reference,
+        ambient: lay.ambient.then(|| {
+            (0..lay.frames)
+                .map(|f| std::array::from_fn(|c| p[lay.a_off() + 3 * f + c]))
+                .collect()
+        }),
+        rms_residual: rms,
+        samples_used: n,
+    }
+}
+
+/// A typical intensity x mm² (sets the lower bound of the constrained rho coefficients).
+fn rho_scale(m: &[FrameMoments]) -> f64 {
+    let (s, w): (f64, f64) = m
+        .iter()
+        .map(|fm| (fm.s[1], fm.g(1)[(fm.h[1].len() - 1, fm.h[1].len() - 1)]))
+        .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    (s / w.max(1e-300)).sqrt().max(1e-12) * 100.0
+}
+
+/// Lower bounds of the constrained fit: (every rho coefficient, every s coefficient).
+fn bounds(scale: f64) -> (f64, f64) {
+    (scale * 1e-6, 1e-6)
+}
+
+/// Lower bound of parameter k: rho and s coefficients only when constrained; gains > 0 and
+/// ambient >= 0 always.
+fn lower(lay: &Layout, k: usize, b: Option<(f64, f64)>) -> f64 {
+    if k >= lay.a_off() {
+        0.0
+    } else if k >= lay.g_off() {
+        1e-9
+    } else if k >= lay.e_off() {
+        b.map_or(f64::NEG_INFINITY, |b| b.1)
+    } else {
+        b.map_or(f64::NEG_INFINITY, |b| b.0)
+    }
+}
+
+fn clamp_to(lay: &Layout, p: &mut [f64], b: Option<(f64, f64)>) {
+    for k in 0..p.len() {
+        p[k] = p[k].max(lower(lay, k, b));
+    }
+}
+
+/// Smallest value of rho (any channel) and s on the positivity grids.
+fn min_positive(lay: &Layout, p: &[f64], grid: usize) -> f64 {
+    let m = grid.max(2);
+    let mut s = vec![1.0];
+    s.extend_from_slice(&p[lay.e_off()..lay.e_off() + lay.ns - 1]);
+    let mut lo = f64::INFINITY;
+    for k in 0..m {
+        let x = k as f64 / (m - 1) as f64;
+        lo = lo.min(bernstein_eval(&s, x));
+        for c in 0..3 {
+            lo = lo.min(bernstein_eval(&p[lay.c_off(c)..lay.c_off(c) + lay.nr], x));
+        }
+    }
+    lo
+}
+
+/// Gauge: the reference frame's gain is 1, its scale moves into rho.
+fn fix_gauge(lay: &Layout, p: &mut [f64], reference: usize) {
+    let k = p[lay.g_off() + reference];
+    if !(k > 0.0) {
+        return;
+    }
+    for f in 0..lay.frames {
+        p[lay.g_off() + f] /= k;
+    }
+    for c in 0..3 {
+        for j in 0..lay.nr {
+            p[lay.c_off(c) + j] *= k;
+        }
+    }
+}
+
+/// Solve the block of parameters `idx` exactly (the model is linear in each block):
+/// minimise `x^T H x - 2 (H x0 - grad)^T x` with bounds.
+fn block_step(p: &mut [f64], h: &DMatrix<f64>, grad: &DVector<f64>, idx: &[usize], lb: &[f64]) {
+    let n = idx.len();
+    let a = DMatrix::from_fn(n, n, |r, c| h[(idx[r], idx[c])]);
+    let x0 = DVector::from_fn(n, |r, _| p[idx[r]]);
+    let b = &a * &x0 - DVector::from_fn(n, |r, _| grad[idx[r]]);
+    let x = solve_box_dyn(&a, &b, &DVector::from_column_slice(lb));
+    for (r, &k) in idx.iter().enumerate() {
+        if x[r].is_finite() {
+            p[k] = x[r];
+        }
+    }
+}
+
+/// Minimise `y^T A y - 2 b^T y` subject to `y >= lb` (A symmetric PSD). Unbounded entries have
+/// `lb = -inf`. Exact by enumerating active sets for n <= 10 (the blocks here are tiny).
+pub(crate) fn solve_box_dyn(a: &DMatrix<f64>, b: &DVector<f64>, lb: &DVector<f64>) -> DVector<f64> {
+    let n = a.nrows();
+    let bounded: Vec<usize> = (0..n).filter(|&i| lb[i].is_finite()).collect();
+    let q = |y: &DVector<f64>| y.dot(&(a * y)) - 2.0 * b.dot(y);
+    let solve_with = |fixed: &[usize]| -> Option<DVector<f64>> {
+        let free: Vec<usize> = (0..n).filter(|i| !fixed.contains(i)).collect();
+        let mut y = DVector::from_fn(n, |i, _| if fixed.contains(&i) { lb[i] } else { 0.0 });
+        if free.is_empty() {
+            return Some(y);
+        }
+        let m = free.len();
+        let mut ar = DMatrix::from_fn(m, m, |r, c| a[(free[r], free[c])]);
+        let br = DVector::from_fn(m, |r, _| {
+            b[free[r]] - fixed.iter().map(|&j| a[(free[r], j)] * lb[j]).sum::<f64>()
+        });
+        let scale = (0..m)
+            .map(|i| ar[(i, i)].abs())
+            .fold(0.0, f64::max)
+            .max(1e-300);
+        for i in 0..m {
+            ar[(i, i)] += scale * 1e-12;
+        }
+        let yr = ar.cholesky()?.solve(&br);
+        for (r, &i) in free.iter().enumerate() {
+            y[i] = yr[r];
+        }
+        Some(y)
+    };
+    if let Some(y) = solve_with(&[]) {
+        if bounded.iter().all(|&i| y[i] >= lb[i]) {
+            return y;
+        }
+    }
+    if bounded.len() > 10 {
+        // Not expected here: clamp the unconstrained answer.
+        let mut y = solve_with(&[]).unwrap_or_else(|| lb.map(|v| v.max(0.0)));
+        for &i in &bounded {
+            y[i] = y[i].max(lb[i]);
+        }
+        return y;
+    }
+    let mut best: Option<(f64, DVector<f64>)> = None;
+    for mask in 1u32..(1 << bounded.len()) {
+        let fixed: Vec<usize> = (0..bounded.len())
+            .filter(|k| mask & (1 << k) != 0)
+            .map(|k| bounded[k])
+            .collect();
+        let Some(y) = solve_with(&fixed) else {
+            continue;
+        };
+        if bounded.iter().all(|&i| y[i] >= lb[i]) {
+            let qy = q(&y);
+            if best.as_ref().is_none_or(|(bq, _)| qy < *bq) {
+                best = Some((qy, y));
+            }
+        }
+    }
+    best.map(|(_, y)| y)
+        .unwrap_or_else(|| lb.map(|v| if v.is_finite() { v } else { 0.0 }))
+}
+
+/// Alternation then LM polish on the moments `m`, from `p`.
+fn solve(
+    lay: &Layout,
+    m: &[FrameMoments],
+    mut p: Vec<f64>,
+    opts: &CalibratedOptions,
+    b: Option<(f64, f64)>,
+    rep: &mut CalibratedReport,
+) -> Vec<f64> {
+    let lbs = |idx: &[usize]| -> Vec<f64> { idx.iter().map(|&k| lower(lay, k, b)).collect() };
+    let mut last = f64::INFINITY;
+    for _ in 0..opts.max_alternations.max(1) {
+        rep.alternations += 1;
+        // rho per channel (independent blocks).
+        let (h, g, _) = normal_equations(lay, m, &p);
+        for c in 0..3 {
+            let idx: Vec<usize> = (0..lay.nr).map(|j| lay.c_off(c) + j).collect();
+            block_step(&mut p, &h, &g, &idx, &lbs(&idx));
+        }
+        if lay.ns > 1 {
+            let (h, g, _) = normal_equations(lay, m, &p);
+            let idx: Vec<usize> = (1..lay.ns).map(|k| lay.e_off() + k - 1).collect();
+            block_step(&mut p, &h, &g, &idx, &lbs(&idx));
+        }
+        let (h, g, _) = normal_equations(lay, m, &p);
+        for f in 0..lay.frames {
+            let mut idx = vec![lay.g_off() + f];
+            if lay.ambient {
+                idx.extend((0..3).map(|c| lay.a_off() + 3 * f + c));
+            }
+            block_step(&mut p, &h, &g, &idx, &lbs(&idx));
+        }
+        fix_gauge(lay, &mut p, opts.reference_frame);
+        let c = cost(lay, m, &p);
+        let done = last - c <= opts.tolerance * c.max(1e-300);
+        last = c;
+        if done {
+            break;
+        }
+    }
+    if opts.lm_polish {
+        p = lm_polish(lay, m, p, last, opts, b, rep);
+    }
+    p
+}
+
+/// Levenberg–Marquardt over all parameters but the reference gain, with Marquardt's diagonal
+/// scaling; steps are projected onto the bounds.
+fn lm_polish(
+    lay: &Layout,
+    m: &[FrameMoments],
+    mut p: Vec<f64>,
+    mut c0: f64,
+    opts: &CalibratedOptions,
+    b: Option<(f64, f64)>,
+    rep: &mut CalibratedReport,
+) -> Vec<f64> {
+    let free: Vec<usize> = (0..lay.len())
+        .filter(|&k| k != lay.g_off() + opts.reference_frame)
+        .collect();
+    let n = free.len();
+    let mut lambda = 1e-6;
+    for _ in 0..opts.max_lm_iterations {
+        let (h, g, c) = normal_equations(lay, m, &p);
+        c0 = c0.min(c);
+        let hf = DMatrix::from_fn(n, n, |r, cc| h[(free[r], free[cc])]);
+        let gf = DVector::from_fn(n, |r, _| -g[free[r]]);
+        let mut improved = false;
+        for _ in 0..20 {
+            let mut a = hf.clone();
+            for k in 0..n {
+                a[(k, k)] += lambda * hf[(k, k)].max(1e-300);
+            }
+            let Some(step) = a.cholesky().map(|ch| ch.solve(&gf)) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut trial = p.clone();
+            for (r, &k) in free.iter().enumerate() {
+                trial[k] = (p[k] + step[r]).max(lower(lay, k, b));
+            }
+            let tc = cost(lay, m, &trial);
+            if tc < c0 {
+                let gain = c0 - tc;
+                p = trial;
+                c0 = tc;
+                lambda = (lambda / 3.0).max(1e-12);
+                rep.lm_steps += 1;
+                improved = gain > opts.tolerance * c0.max(1e-300);
+                break;
+            }
+            lambda *= 4.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    p
+}
+
+/// The model's prediction per channel for sample i (albedo included when given).
+#[inline]
+fn predict(
+    lay: &Layout,
+    p: &[f64],
+    s_coeffs: &[f64],
+    samples: &PooledSamples,
+    t: &[f32],
+    albedo: Option<&[Vec<f32>; 3]>,
+    i: usize,
+) -> [f64; 3] {
+    let f = samples.frame[i] as usize;
+    let z = f64::from(samples.z[i]);
+    let gam = f64::from(samples.gamma[i]);
+    let k = p[lay.g_off() + f] * bernstein_eval(s_coeffs, f64::from(t[i])) / (z * z);
+    std::array::from_fn(|c| {
+        let alb = albedo.map_or(1.0, |a| f64::from(a[c][i]));
+        let amb = if lay.ambient {
+            p[lay.a_off() + 3 * f + c]
+        } else {
+            0.0
+        };
+        k * alb * bernstein_eval(&p[lay.c_off(c)..lay.c_off(c) + lay.nr], gam) + amb
+    })
+}
+
+fn s_coeffs(lay: &Layout, p: &[f64]) -> Vec<f64> {
+    let mut s = vec![1.0];
+    s.extend_from_slice(&p[lay.e_off()..lay.e_off() + lay.ns - 1]);
+    s
+}
+
+/// New weights: `base x robust(u / sigma)` with u the RMS over channels of the relative
+/// residual `(I - pred) / (|pred| + floor)` and sigma its robust scale.
+fn robust_weights(
+    samples: &PooledSamples,
+    t: &[f32],
+    base: &[f32],
+    albedo: Option<&[Vec<f32>; 3]>,
+    lay: &Layout,
+    p: &[f64],
+    opts: &CalibratedOptions,
+) -> Vec<f32> {
+    let sc = s_coeffs(lay, p);
+    let u: Vec<f32> = (0..samples.len())
+        .into_par_iter()
+        .with_min_len(4096)
+        .map(|i| {
+            if base[i] == 0.0 {
+                return f32::NAN;
+            }
+            let pr = predict(lay, p, &sc, samples, t, albedo, i);
+            let ss: f64 = (0..3)
+                .map(|c| {
+                    let e = (f64::from(samples.rgb[c][i]) - pr[c])
+                        / (pr[c].abs() + opts.relative_floor);
+                    e * e
+                })
+                .sum();
+            (ss / 3.0).sqrt() as f32
+        })
+        .collect();
+    let mut v: Vec<f32> = u.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return base.to_vec();
+    }
+    let mid = v.len() / 2;
+    let med = f64::from(*v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1);
+    // The median of sqrt(chi²_3 / 3) is 0.888 sigma.
+    let sigma = (med / 0.888).max(1e-9);
+    u.iter()
+        .zip(base)
+        .map(|(&ui, &bi)| {
+            if !ui.is_finite() {
+                return 0.0;
+            }
+            let x = f64::from(ui) / sigma;
+            let r = match opts.robust {
+                Robust::None => 1.0,
+                Robust::Huber(k) => {
+                    if x <= k {
+                        1.0
+                    } else {
+                        k / x
+                    }
+                }
+                Robust::Tukey(c) => {
+                    let q = x / c;
+                    if q < 1.0 {
+                        (1.0 - q * q).powi(2)
+                    } else {
+                        0.0
+                    }
+                }
+            };
+            (f64::from(bi) * r) as f32
+        })
+        .collect()
+}
+
+/// Weighted RMS residual per channel and the weight sum.
+fn residual_rms(
+    samples: &PooledSamples,
+    t: &[f32],
+    w: &[f32],
+    albedo: Option<&[Vec<f32>; 3]>,
+    lay: &Layout,
+    p: &[f64],
+) -> ([f64; 3], f64) {
+    let sc = s_coeffs(lay, p);
+    let (sums, ws) = (0..samples.len())
+        .into_par_iter()
+        .with_min_len(4096)
+        .fold(
+            || ([0.0f64; 3], 0.0f64),
+            |(mut acc, ws), i| {
+                let wi = f64::from(w[i]);
+                if wi == 0.0 {
+                    return (acc, ws);
+                }
+                let pr = predict(lay, p, &sc, samples, t, albedo, i);
+                for c in 0..3 {
+                    let e = f64::from(samples.rgb[c][i]) - pr[c];
+                    acc[c] += wi * e * e;
+                }
+                (acc, ws + wi)
+            },
+        )
+        .reduce(
+            || ([0.0; 3], 0.0),
+            |(a, wa), (b, wb)| ([a[0] + b[0], a[1] + b[1], a[2] + b[2]], wa + wb),
+        );
+    (
+        std::array::from_fn(|c| (sums[c] / ws.max(1e-300)).sqrt()),
+        ws,
+    )
+}

@@ -1,0 +1,334 @@
+//! Samples of the calibrated fit, pooled over all frames: (gamma, cos theta, z, frame, R, G, B)
+//! per pixel that obeys the model, subsampled per frame, and their density weights over
+//! (gamma, z, theta) (the paper's inverse-density weights, §2.3, with the third axis).
+
+// Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
+#![allow(clippy::needless_range_loop)]
+// `!(x > t)` on floats is deliberate: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use super::samples::{ExclusionCounts, SampleOptions};
+use super::weights::WeightOptions;
+use crate::{Error, Result};
+use rayon::prelude::*;
+
+/// One frame's per-pixel inputs (row-major, one entry per pixel unless said otherwise).
+#[derive(Debug, Clone, Copy)]
+pub struct FrameData<'a> {
+    /// cos(view ray, surface normal) (unitless; see `GBuffer::gamma`).
+    pub gamma: &'a [f32],
+    /// Distance camera → surface (mm); `<= 0` or not finite: no hit.
+    pub z: &'a [f32],
+    /// cos of the pixel ray's angle off the optical axis (the ray table's `dirs[i][2]`).
+    pub cos_theta: &'a [f32],
+    /// Linear RGB in 0..1, interleaved (3 values per pixel).
+    pub rgb: &'a [f32],
+    /// Optional texel (or surface patch) id per pixel for the albedo refinement; `u32::MAX`
+    /// for none.
+    pub texel: Option<&'a [u32]>,
+}
+
+/// How pixels become pooled samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoolOptions {
+    /// Which pixels obey the model (grazing, saturated, dark pixels are excluded and counted);
+    /// its depth percentiles are not used (the calibrated model uses absolute depth).
+    pub sample: SampleOptions,
+    /// Most samples kept per frame (bounds the fit's cost). The kept pixels are a jittered
+    /// systematic sample in raster order, i.e. spread evenly over the image. Default 20000.
+    pub max_per_frame: usize,
+    /// Seed of the jitter (the subsample is reproducible).
+    pub seed: u64,
+}
+
+impl Default for PoolOptions {
+    fn default() -> Self {
+        PoolOptions {
+            sample: SampleOptions::default(),
+            max_per_frame: 20_000,
+            seed: 0x5eed,
+        }
+    }
+}
+
+/// Samples of all frames, struct of arrays, grouped by frame in frame order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PooledSamples {
+    /// cos(view ray, normal), in [min_gamma, 1].
+    pub gamma: Vec<f32>,
+    /// cos of the ray's angle off the optical axis.
+    pub cos_theta: Vec<f32>,
+    /// Distance camera → surface (mm).
+    pub z: Vec<f32>,
+    /// Frame index of each sample.
+    pub frame: Vec<u32>,
+    /// Pixel index (row-major) of each sample within its frame.
+    pub pixel: Vec<u32>,
+    /// Linear intensity per channel R, G, B.
+    pub rgb: [Vec<f32>; 3],
+    /// Texel id per sample when the frames gave them (`u32::MAX`: none).
+    pub texel: Option<Vec<u32>>,
+    /// `frame_start[f]..frame_start[f + 1]` are frame f's samples (length frames + 1).
+    pub frame_start: Vec<usize>,
+    /// Pixels excluded per frame, by reason (subsampling does not count as exclusion).
+    pub excluded: Vec<ExclusionCounts>,
+}
+
+impl PooledSamples {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.gamma.len()
+    }
+
+    /// True when there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.gamma.is_empty()
+    }
+
+    /// Number of frames pooled.
+    pub fn frames(&self) -> usize {
+        self.frame_start.len().saturating_sub(1)
+    }
+
+    /// Smallest cos theta among the samples (the fit's angular edge).
+    pub fn min_cos_theta(&self) -> f64 {
+        self.cos_theta
+            .iter()
+            .fold(1.0f64, |m, &c| m.min(f64::from(c)))
+    }
+}
+
+/// SplitMix64 hash: the reproducible jitter of the subsample.
+fn hash(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Pool the samples of `frames` (parallel over frames). Errors name the frame whose slices
+/// disagree in length.
+pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSamples> {
+    for (f, fr) in frames.iter().enumerate() {
+        let n = fr.gamma.len();
+        if fr.z.len() != n || fr.cos_theta.len() != n || fr.rgb.len() != 3 * n {
+            return Err(Error::Other(format!(
+                "calibrated samples: frame {f}: {n} gamma, {} z, {} cos_theta, {} rgb values \
+                 (expected n, n, n, 3n)",
+                fr.z.len(),
+                fr.cos_theta.len(),
+                fr.rgb.len()
+            )));
+        }
+        if fr.texel.is_some_and(|t| t.len() != n) {
+            return Err(Error::Other(format!(
+                "calibrated samples: frame {f}: texel ids for {} pixels, expected {n}",
+                fr.texel.map_or(0, |t| t.len())
+            )));
+        }
+    }
+    let with_texels = frames.iter().any(|f| f.texel.is_some());
+    let so = &opts.sample;
+    let per_frame: Vec<(Vec<u32>, ExclusionCounts)> = frames
+        .par_iter()
+        .map(|fr| {
+            let mut ex = ExclusionCounts::default();
+            let mut keep = Vec::new();
+            for i in 0..fr.gamma.len() {
+                let zi = fr.z[i];
+                if !(zi.is_finite() && zi > 0.0) {
+                    ex.no_hit += 1;
+                    continue;
+                }
+                if !(fr.gamma[i] >= so.min_gamma) || !fr.cos_theta[i].is_finite() {
+                    ex.grazing += 1;
+                    continue;
+                }
+                let px = &fr.rgb[3 * i..3 * i + 3];
+                if px.iter().any(|v| !(*v < so.saturation_level)) {
+                    ex.saturated += 1;
+                    continue;
+                }
+                if px.iter().all(|v| *v < so.noise_floor) {
+                    ex.dark += 1;
+                    continue;
+                }
+                keep.push(i as u32);
+            }
+            (keep, ex)
+        })
+        .collect();
+    let mut out = PooledSamples {
+        frame_start: vec![0],
+        ..Default::default()
+    };
+    if with_texels {
+        out.texel = Some(Vec::new());
+    }
+    for (f, ((keep, ex), fr)) in per_frame.into_iter().zip(frames).enumerate() {
+        let m = opts.max_per_frame.max(1);
+        let chosen: Vec<u32> = if keep.len() <= m {
+            keep
+        } else {
+            // Jittered systematic sample: one pixel per stratum of len/m consecutive kept pixels.
+            let step = keep.len() as f64 / m as f64;
+            (0..m)
+                .map(|j| {
+                    let u = (hash(opts.seed ^ ((f as u64) << 32) ^ j as u64) >> 11) as f64
+                        / (1u64 << 53) as f64;
+                    keep[(((j as f64) + u) * step) as usize % keep.len()]
+                })
+                .collect()
+        };
+        for &i in &chosen {
+            let i = i as usize;
+            out.gamma.push(fr.gamma[i].min(1.0));
+            out.cos_theta.push(fr.cos_theta[i]);
+            out.z.push(fr.z[i]);
+            out.frame.push(f as u32);
+            out.pixel.push(i as u32);
+            for ch in 0..3 {
+                out.rgb[ch].push(fr.rgb[3 * i + ch]);
+            }
+            if let Some(t) = out.texel.as_mut() {
+                t.push(fr.texel.map_or(u32::MAX, |tx| tx[i]));
+            }
+        }
+        out.excluded.push(ex);
+        out.frame_start.push(out.gamma.len());
+    }
+    Ok(out)
+}
+
+/// Inverse-density weights over (gamma, z, theta): a 3-D histogram with
+/// `cbrt(N / target_per_bin)` bins per axis (clamped to `min_bins..=max_bins`) over the
+/// samples' gamma range, their z range between the 0.5th and 99.5th percentiles (outside:
+/// the edge bins) and t = (1 - cos theta)/(1 - min cos theta) in [0, 1]. Each weight is
+/// `1 / count` of its bin, scaled to mean 1.
+pub fn density_weights_3d(samples: &PooledSamples, opts: &WeightOptions) -> Vec<f32> {
+    let n = samples.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    let per_axis = (n as f64 / opts.target_per_bin.max(1.0)).cbrt().round() as usize;
+    let nb = per_axis.clamp(
+        opts.min_bins.max(1),
+        opts.max_bins.max(opts.min_bins.max(1)),
+    );
+    let (g_lo, g_hi) = samples
+        .gamma
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &g| {
+            (lo.min(g), hi.max(g))
+        });
+    let mut zs: Vec<f32> = samples
+        .z
+        .iter()
+        .step_by((n / 100_000).max(1))
+        .copied()
+        .collect();
+    let m = zs.len();
+    let z_lo = *zs.select_nth_unstable_by(m / 200, |a, b| a.total_cmp(b)).1;
+    let z_hi = *zs
+        .select_nth_unstable_by((m - 1) - m / 200, |a, b| a.total_cmp(b))
+        .1;
+    let c_lo = samples.min_cos_theta();
+    let span = |lo: f64, hi: f64| (hi - lo).max(1e-12);
+    let (gs, zsn, ts) = (
+        span(f64::from(g_lo), f64::from(g_hi)),
+        span(f64::from(z_lo), f64::from(z_hi)),
+        span(0.0, 1.0 - c_lo),
+    );
+    let bin = |x: f64| ((x * nb as f64).max(0.0) as usize).min(nb - 1);
+    let bins: Vec<u32> = (0..n)
+        .into_par_iter()
+        .with_min_len(8192)
+        .map(|i| {
+            let a = bin(f64::from(samples.gamma[i] - g_lo) / gs);
+            let b = bin(f64::from(samples.z[i] - z_lo) / zsn);
+            let c = bin((1.0 - f64::from(samples.cos_theta[i])) / ts);
+            ((a * nb + b) * nb + c) as u32
+        })
+        .collect();
+    let mut counts = vec![0u32; nb * nb * nb];
+    for &b in &bins {
+        counts[b as usize] += 1;
+    }
+    let occupied = counts.iter().filter(|&&c| c > 0).count();
+    let scale = n as f64 / occupied as f64;
+    bins.iter()
+        .map(|&b| (scale / f64::from(counts[b as usize])) as f32)
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pooling_excludes_subsamples_and_groups_by_frame() {
+        let n = 1000;
+        let gamma: Vec<f32> = (0..n)
+            .map(|i| if i % 10 == 0 { 0.01 } else { 0.5 })
+            .collect();
+        let z: Vec<f32> = (0..n)
+            .map(|i| if i % 10 == 1 { 0.0 } else { 10.0 })
+            .collect();
+        let ct = vec![0.9f32; n];
+        let rgb: Vec<f32> = (0..3 * n)
+            .map(|k| if (k / 3) % 10 == 2 { 1.0 } else { 0.3 })
+            .collect();
+        let fr = FrameData {
+            gamma: &gamma,
+            z: &z,
+            cos_theta: &ct,
+            rgb: &rgb,
+            texel: None,
+        };
+        let opts = PoolOptions {
+            max_per_frame: 350,
+            ..Default::default()
+        };
+        let p = pool_frames(&[fr, fr], &opts).unwrap();
+        assert_eq!(p.frames(), 2);
+        assert_eq!(p.frame_start, vec![0, 350, 700]);
+        let ex = p.excluded[1];
+        assert_eq!((ex.no_hit, ex.grazing, ex.saturated), (100, 100, 100));
+        // Subsample: distinct valid pixels, spread over the image.
+        let mut px: Vec<u32> = p.pixel[..350].to_vec();
+        px.dedup();
+        assert_eq!(px.len(), 350);
+        assert!(px.iter().all(|&i| i % 10 >= 3));
+        assert!(px[0] < 10 && px[349] > 980);
+        // Too few cos values: a named error.
+        let bad = FrameData {
+            cos_theta: &ct[..5],
+            ..fr
+        };
+        assert!(pool_frames(&[fr, bad], &opts)
+            .unwrap_err()
+            .to_string()
+            .contains("frame 1"));
+    }
+
+    #[test]
+    fn density_weights_equalise_bins() {
+        let mut p = PooledSamples::default();
+        // 900 samples in one cell, 100 spread out.
+        for i in 0..1000 {
+            let (g, z, c) = if i < 900 {
+                (0.2, 10.0, 0.99)
+            } else {
+                let k = (i - 900) as f32 / 100.0;
+                (0.1 + 0.8 * k, 5.0 + 30.0 * k, 1.0 - 0.5 * k)
+            };
+            p.gamma.push(g);
+            p.z.push(z);
+            p.cos_theta.push(c);
+        }
+        let w = density_weights_3d(&p, &WeightOptions::default());
+        let mean = w.iter().map(|&x| f64::from(x)).sum::<f64>() / 1000.0;
+        assert!((mean - 1.0).abs() < 1e-5);
+        assert!(w[0] * 20.0 < w[950], "{} {}", w[0], w[950]);
+    }
+}

@@ -1,0 +1,258 @@
+//! The calibrated light model (issue 8), on a physically based multi-frame video with known
+//! truth (tests/calibrated_support): recovery of the per-frame gains and of the light's cone
+//! profile, the albedo refinement, and held-out frame prediction against the paper's
+//! nearest-viewpoint Psi.
+
+#![allow(clippy::needless_range_loop)]
+
+mod calibrated_support;
+
+use bronchosim::shading::calibrated_plots::{plot_gains, plot_light_profile, plot_rho};
+use bronchosim::shading::{
+    density_weights, density_weights_3d, extract_samples, fit_calibrated, fit_gain, fit_psi,
+    pool_frames, predict_pixels, psnr, refine_with_texels, Albedo, CalibratedModel,
+    CalibratedOptions, FitOptions, FrameData, PoolOptions, PooledSamples, Robust, SampleOptions,
+    WeightOptions,
+};
+use calibrated_support::{cone_profile, render, sequence, Frame, RenderOptions, View};
+use std::sync::OnceLock;
+
+const FRAMES: usize = 48;
+
+type Video = (Vec<View>, Vec<Frame>);
+
+fn render_video(slow_albedo: f64) -> Video {
+    let views = sequence(FRAMES, 11);
+    let opts = RenderOptions {
+        slow_albedo,
+        ..Default::default()
+    };
+    let frames = views
+        .iter()
+        .enumerate()
+        .map(|(f, v)| render(v, &opts, 1000 + f as u64))
+        .collect();
+    (views, frames)
+}
+
+/// The video with vessels and colour but no slow albedo drift along the airway.
+fn video() -> &'static Video {
+    static V: OnceLock<Video> = OnceLock::new();
+    V.get_or_init(|| render_video(0.0))
+}
+
+/// The same video with an 8% slow albedo variation (period about 30 mm along the airway).
+fn video_slow_albedo() -> &'static Video {
+    static V: OnceLock<Video> = OnceLock::new();
+    V.get_or_init(|| render_video(0.08))
+}
+
+fn frame_data(fr: &Frame) -> FrameData<'_> {
+    FrameData {
+        gamma: &fr.gamma,
+        z: &fr.z,
+        cos_theta: &fr.cos_theta,
+        rgb: &fr.rgb,
+        texel: Some(&fr.texel),
+    }
+}
+
+fn pooled(frames: &[&Frame]) -> (PooledSamples, Vec<f32>) {
+    let data: Vec<FrameData> = frames.iter().map(|f| frame_data(f)).collect();
+    let s = pool_frames(&data, &PoolOptions::default()).unwrap();
+    let w = density_weights_3d(&s, &WeightOptions::default());
+    (s, w)
+}
+
+/// Largest relative gain error after fixing frame `reference`'s gain to 1 in the truth too.
+fn gain_error(model: &CalibratedModel, views: &[&View]) -> f64 {
+    let g0 = views[model.reference_frame].gain;
+    model
+        .gains
+        .iter()
+        .zip(views)
+        .map(|(g, v)| (g / (v.gain / g0) - 1.0).abs())
+        .fold(0.0, f64::max)
+}
+
+/// RMS over theta in [0, edge] (even in degrees) of s_fit / s_true - 1.
+fn profile_error(model: &CalibratedModel) -> f64 {
+    let edge = model.theta_edge_deg();
+    let n = 200;
+    let ss: f64 = (0..=n)
+        .map(|k| {
+            let th = edge * k as f64 / n as f64;
+            (model.s(th.to_radians().cos()) / cone_profile(th) - 1.0).powi(2)
+        })
+        .sum();
+    (ss / (n + 1) as f64).sqrt()
+}
+
+#[test]
+fn calibrated_fit_recovers_gains_and_cone_profile() {
+    let (views, frames) = video();
+    let all: Vec<&Frame> = frames.iter().collect();
+    let vs: Vec<&View> = views.iter().collect();
+    let (s, w) = pooled(&all);
+    let t0 = std::time::Instant::now();
+    let fit = fit_calibrated(&s, &w, &CalibratedOptions::default()).unwrap();
+    let dt = t0.elapsed();
+    let (ge, pe) = (gain_error(&fit.model, &vs), profile_error(&fit.model));
+    println!(
+        "uniform albedo: {} samples, {:.2} s, max gain error {:.3}%, s RMS error {:.3}% over 0..{:.1} deg, \
+         rms {:?}, {:?}",
+        s.len(),
+        dt.as_secs_f64(),
+        100.0 * ge,
+        100.0 * pe,
+        fit.model.theta_edge_deg(),
+        fit.model.rms_residual,
+        fit.report
+    );
+    assert!(ge < 0.02, "max gain error {ge}");
+    // The report's plots: rho(gamma), s(theta) against the true cone, the gains.
+    let dir = tempfile::tempdir().unwrap();
+    let truth = |th: f64| cone_profile(th);
+    for (name, r) in [
+        ("rho.png", plot_rho(&fit.model, &dir.path().join("rho.png"))),
+        (
+            "s.png",
+            plot_light_profile(&fit.model, Some(&truth), &dir.path().join("s.png")),
+        ),
+        (
+            "gains.png",
+            plot_gains(&fit.model, &dir.path().join("gains.png")),
+        ),
+    ] {
+        r.unwrap();
+        let len = std::fs::metadata(dir.path().join(name)).unwrap().len();
+        assert!(len > 5_000, "{name}: {len} bytes");
+    }
+    assert!(pe < 0.05, "profile RMS error {pe}");
+    // rho_R / rho_G at gamma = 1 carries the mean albedo ratio (plus the white specular).
+    let ratio = fit.model.rho(0, 0.8) / fit.model.rho(1, 0.8);
+    assert!(ratio > 1.5 && ratio < 2.0, "R/G {ratio}");
+}
+
+#[test]
+fn slow_albedo_drift_biases_the_gains_but_not_the_profile() {
+    // The uniform-albedo assumption: a frame that sees a brighter stretch of airway reads as a
+    // higher gain. The light profile, shared by all frames, stays accurate.
+    let (views, frames) = video_slow_albedo();
+    let all: Vec<&Frame> = frames.iter().collect();
+    let vs: Vec<&View> = views.iter().collect();
+    let (s, w) = pooled(&all);
+    let fit = fit_calibrated(&s, &w, &CalibratedOptions::default()).unwrap();
+    let (ge, pe) = (gain_error(&fit.model, &vs), profile_error(&fit.model));
+    println!(
+        "8% slow albedo variation: max gain error {:.3}%, s RMS error {:.3}%",
+        100.0 * ge,
+        100.0 * pe
+    );
+    assert!(pe < 0.05, "profile RMS error {pe}");
+    assert!(ge > 0.02 && ge < 0.15, "max gain error {ge}");
+}
+
+/// Known failure, kept to measure future work: alternating the light fit with a per-texel
+/// albedo solved exactly in the log domain drifts the gains along the video (small errors of
+/// the fitted rho at grazing angles bias every far-near texel link, and the links chain).
+#[test]
+#[ignore = "known failure: the texel-albedo refinement drifts the gains (see the report)"]
+fn albedo_refinement_keeps_or_improves_the_fit() {
+    let (views, frames) = video();
+    let all: Vec<&Frame> = frames.iter().collect();
+    let vs: Vec<&View> = views.iter().collect();
+    let (s, w) = pooled(&all);
+    let r = refine_with_texels(&s, &w, &CalibratedOptions::default(), 3, 2).unwrap();
+    let (g0, p0) = (gain_error(&r.initial, &vs), profile_error(&r.initial));
+    let (g1, p1) = (gain_error(&r.fit.model, &vs), profile_error(&r.fit.model));
+    println!(
+        "refinement: gain error {:.3}% -> {:.3}%, s error {:.3}% -> {:.3}%, rounds {:?}",
+        100.0 * g0,
+        100.0 * g1,
+        100.0 * p0,
+        100.0 * p1,
+        r.rounds
+    );
+    assert!(g1 < 0.02 && p1 < 0.05, "{g1} {p1}");
+}
+
+#[test]
+fn calibrated_predicts_held_out_frames_better_than_nearest_psi() {
+    let (views, frames) = video();
+    let held: Vec<usize> = (3..FRAMES).step_by(6).collect();
+    let train: Vec<usize> = (0..FRAMES).filter(|f| !held.contains(f)).collect();
+    let tf: Vec<&Frame> = train.iter().map(|&f| &frames[f]).collect();
+    let (s, w) = pooled(&tf);
+    let model = fit_calibrated(&s, &w, &CalibratedOptions::default())
+        .unwrap()
+        .model;
+    let sopts = SampleOptions::default();
+    let psi_opts = FitOptions {
+        robust: Robust::Tukey(4.685),
+        ..Default::default()
+    };
+    let (mut cal, mut pap, mut cal_u, mut pap_u) = (0.0, 0.0, 0.0, 0.0);
+    for &h in &held {
+        let fr = &frames[h];
+        // The paper's choice: the fitted viewpoint nearest to the new one.
+        let dist = |f: usize| {
+            let (a, b) = (views[f].eye, views[h].eye);
+            (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>()
+        };
+        let near = *train
+            .iter()
+            .min_by(|&&a, &&b| dist(a).total_cmp(&dist(b)))
+            .unwrap();
+        let nf = &frames[near];
+        let ns = extract_samples(&nf.gamma, &nf.z, &nf.rgb, &sopts);
+        let nw = density_weights(&ns, &WeightOptions::default()).weights;
+        let psi = fit_psi(&ns, &nw, &psi_opts).unwrap().model;
+        // Score on the held-out frame's pixels that obey either model.
+        let n = fr.gamma.len();
+        let mask: Vec<bool> = (0..n)
+            .map(|i| {
+                fr.z[i] > 0.0
+                    && fr.gamma[i] >= sopts.min_gamma
+                    && (0..3).all(|c| fr.rgb[3 * i + c] < sopts.saturation_level)
+            })
+            .collect();
+        for (albedo, cal_acc, pap_acc) in [
+            (Some(&fr.albedo_rel), &mut cal, &mut pap),
+            (None, &mut cal_u, &mut pap_u),
+        ] {
+            let alb = albedo.map_or(Albedo::Uniform, |a| Albedo::PerPixel(a));
+            let pc = predict_pixels(
+                &model,
+                &fr.gamma,
+                &fr.z,
+                &fr.cos_theta,
+                alb,
+                1.0,
+                model.new_view_ambient(),
+            );
+            let pp: Vec<f32> = (0..3 * n)
+                .map(|k| {
+                    let i = k / 3;
+                    if fr.z[i] <= 0.0 {
+                        return 0.0;
+                    }
+                    let a = albedo.map_or(1.0, |a| f64::from(a[k]));
+                    (a * psi.eval(k % 3, f64::from(fr.gamma[i]), f64::from(fr.z[i]))) as f32
+                })
+                .collect();
+            // Neither model knows the held-out frame's auto-exposure: one scalar each.
+            let kc = fit_gain(&pc, &fr.rgb, &mask);
+            let kp = fit_gain(&pp, &fr.rgb, &mask);
+            *cal_acc += psnr(&pc, &fr.rgb, &mask, kc) / held.len() as f64;
+            *pap_acc += psnr(&pp, &fr.rgb, &mask, kp) / held.len() as f64;
+        }
+    }
+    println!(
+        "held-out PSNR over {} frames: true albedo: calibrated {cal:.2} dB, nearest Psi {pap:.2} dB; \
+         uniform albedo: calibrated {cal_u:.2} dB, nearest Psi {pap_u:.2} dB",
+        held.len()
+    );
+    assert!(cal > pap + 1.0, "calibrated {cal} vs Psi {pap}");
+    assert!(cal_u > pap_u, "calibrated {cal_u} vs Psi {pap_u}");
+}
