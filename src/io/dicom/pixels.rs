@@ -10,6 +10,8 @@ use crate::{Error, Result};
 /// BitsStored/HighBit masking, sign extension and RescaleSlope/Intercept.
 pub(crate) fn decode_slice(src: Source<'_>, h: &SliceHeader, out: &mut [f32]) -> Result<()> {
     let name = src.name();
+    // SliceHeader::read has checked every element length (pixel data included) against the
+    // file size, so this full parse cannot be made to allocate gigabytes.
     let obj = src.open(false)?;
     let decode_error = |e: &dyn std::fmt::Display| {
         Error::invalid(
