@@ -425,3 +425,44 @@ fn deeply_nested_sequences_fail_cleanly() {
     );
     assert!(took < std::time::Duration::from_secs(1), "took {took:?}");
 }
+
+#[test]
+fn corrupt_rle_segments_fail_cleanly() {
+    // Found by cargo-fuzz: dicom-transfer-syntax-registry 0.10 panics on such RLE fragments;
+    // the reader decodes RLE itself and reports them.
+    let good = std::fs::read(data("axial_rle").join("IM0000.dcm")).unwrap();
+    let pixel = find(&good, &[0xE0, 0x7F, 0x10, 0x00]);
+    let item = [0xFE, 0xFF, 0x00, 0xE0];
+    let table = pixel + find(&good[pixel..], &item); // basic offset table item
+    let frag = table + 8 + find(&good[table + 8..], &item); // the frame's fragment item
+    let header = frag + 8; // the 64-byte RLE header: segment count, 15 offsets
+    let frag_len = u32::from_le_bytes(good[frag + 4..frag + 8].try_into().unwrap()) as usize;
+    assert_eq!(
+        u32::from_le_bytes(good[header..header + 4].try_into().unwrap()),
+        2
+    );
+
+    let mut count = good.clone(); // 2^31 segments: would allocate 8 GB of offsets, then panic
+    count[header..header + 4].copy_from_slice(&0x8000_0000u32.to_le_bytes());
+    let mut short = good.clone(); // the LSB segment is 2 bytes: decodes to too few pixels
+    let lsb = (frag_len - 2) as u32;
+    short[header + 8..header + 12].copy_from_slice(&lsb.to_le_bytes());
+    let mut outside = good.clone(); // a segment offset past the fragment
+    outside[header + 8..header + 12].copy_from_slice(&(frag_len as u32 + 10).to_le_bytes());
+    let mut tiny = good[..header].to_vec(); // a fragment shorter than the RLE header
+    tiny[frag + 4..frag + 8].copy_from_slice(&4u32.to_le_bytes());
+    tiny.extend_from_slice(&[2, 0, 0, 0, 0xFE, 0xFF, 0xDD, 0xE0, 0, 0, 0, 0]);
+
+    for (name, bytes, want) in [
+        ("count.dcm", count, "2147483648 segments"),
+        ("short.dcm", short, "decodes to"),
+        ("outside.dcm", outside, "of a"),
+        ("tiny.dcm", tiny, "shorter than the 64-byte header"),
+    ] {
+        let (err, _) = read_one_corrupt(name, bytes);
+        assert!(
+            err.contains(name) && err.contains("corrupt RLE Lossless") && err.contains(want),
+            "{name}: {err}"
+        );
+    }
+}

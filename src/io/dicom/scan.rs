@@ -9,7 +9,7 @@
 //! else that is malformed (a truncated header, an unknown transfer syntax, an undecodable
 //! deflate stream) is left for the parser to report in its own words.
 
-use std::io::{Cursor, Read, Seek};
+use std::io::{BufReader, Cursor, Read};
 use std::path::Path;
 
 use flate2::read::DeflateDecoder;
@@ -24,8 +24,6 @@ const ITEM: (u16, u16) = (0xFFFE, 0xE000);
 const ITEM_END: (u16, u16) = (0xFFFE, 0xE00D);
 const SEQ_END: (u16, u16) = (0xFFFE, 0xE0DD);
 const PIXEL_DATA: (u16, u16) = (0x7FE0, 0x0010);
-/// Largest ratio deflate can reach (258 bytes from about 2 bits), with margin.
-const MAX_DEFLATE_RATIO: u64 = 1100;
 
 /// VRs whose explicit header carries a 16-bit length (PS3.5 7.1.2); every other code,
 /// including unknown ones, has 2 reserved bytes and a 32-bit length, as in dicom-encoding.
@@ -66,8 +64,47 @@ struct Header {
     len: u32,
 }
 
+/// A byte source the walk can skip forward in: by seeking when it can, else by reading.
+pub(crate) trait Skip: Read {
+    fn skip(&mut self, n: u64) -> std::io::Result<()>;
+}
+
+impl Skip for BufReader<std::fs::File> {
+    fn skip(&mut self, n: u64) -> std::io::Result<()> {
+        self.seek_relative(n as i64)
+    }
+}
+
+impl Skip for Cursor<&[u8]> {
+    fn skip(&mut self, n: u64) -> std::io::Result<()> {
+        self.set_position(self.position().saturating_add(n));
+        Ok(())
+    }
+}
+
+/// A stream that can only be read (an inflating decoder): skipping reads and drops.
+struct Stream<R>(R);
+
+impl<R: Read> Read for Stream<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        self.0.read(buf)
+    }
+}
+
+impl<R: Read> Skip for Stream<R> {
+    fn skip(&mut self, n: u64) -> std::io::Result<()> {
+        let got = std::io::copy(&mut (&mut self.0).take(n), &mut std::io::sink())?;
+        if got < n {
+            return Err(std::io::ErrorKind::UnexpectedEof.into());
+        }
+        Ok(())
+    }
+}
+
 struct Walker<'p, R> {
     r: R,
+    /// Four bytes read ahead and given back (a peeked tag), consumed before `r`.
+    pending: Option<[u8; 4]>,
     pos: u64,
     len: u64,
     name: &'p Path,
@@ -77,9 +114,10 @@ struct Walker<'p, R> {
 
 /// Check the DICOM file `r` of `len` bytes (named `name` in errors), from its preamble on:
 /// every declared value length must fit in the bytes that remain.
-pub(crate) fn check_lengths<R: Read + Seek>(r: R, len: u64, name: &Path) -> Result<()> {
+pub(crate) fn check_lengths<R: Skip>(r: R, len: u64, name: &Path) -> Result<()> {
     let mut w = Walker {
         r,
+        pending: None,
         pos: 0,
         len,
         name,
@@ -91,18 +129,35 @@ pub(crate) fn check_lengths<R: Read + Seek>(r: R, len: u64, name: &Path) -> Resu
     }
 }
 
-impl<R: Read + Seek> Walker<'_, R> {
+impl<R: Skip> Walker<'_, R> {
     fn bytes<const N: usize>(&mut self) -> Walk<[u8; N]> {
         let mut b = [0u8; N];
-        self.r.read_exact(&mut b).map_err(|_| Stop::Leave)?;
+        let mut from = 0;
+        if let Some(p) = self.pending.take() {
+            // Only a header read (4 bytes first) follows a peek.
+            if N < 4 {
+                return Err(Stop::Leave);
+            }
+            b[..4].copy_from_slice(&p);
+            from = 4;
+        }
+        self.r.read_exact(&mut b[from..]).map_err(|_| Stop::Leave)?;
         self.pos += N as u64;
         Ok(b)
     }
 
-    fn skip(&mut self, n: u64) -> Walk<()> {
-        self.r.seek_relative(n as i64).map_err(|_| Stop::Leave)?;
+    /// Give back four bytes just read by [`Walker::bytes`].
+    fn unread(&mut self, b: [u8; 4]) {
+        self.pending = Some(b);
+        self.pos -= 4;
+    }
+
+    fn skip(&mut self, mut n: u64) -> Walk<()> {
         self.pos += n;
-        Ok(())
+        if n > 0 && self.pending.take().is_some() {
+            n -= 4.min(n);
+        }
+        self.r.skip(n).map_err(|_| Stop::Leave)
     }
 
     fn u16(b: [u8; 2], enc: Encoding) -> u16 {
@@ -182,7 +237,7 @@ impl<R: Read + Seek> Walker<'_, R> {
             self.fits(&h)?;
             if h.tag == (0x0002, 0x0010) && h.len <= 256 {
                 syntax.resize(h.len as usize, 0);
-                self.r.read_exact(&mut syntax).map_err(|_| Stop::Leave)?;
+                self.r.read_exact(&mut syntax).map_err(|_| Stop::Leave)?; // nothing pending here
                 self.pos += h.len as u64;
             } else {
                 self.skip(h.len as u64)?;
@@ -210,18 +265,26 @@ impl<R: Read + Seek> Walker<'_, R> {
         }
     }
 
-    /// Inflate the rest of the file (as the parser will) and walk the result.
+    /// Walk the rest of the file as it inflates (as the parser will read it), in a first pass
+    /// that only measures the inflated size, then a second that checks lengths against it.
+    /// Streaming: a deflate bomb costs time, not memory.
     fn deflated(&mut self) -> Walk<()> {
         let rest = self.len.saturating_sub(self.pos);
-        let cap = rest.saturating_mul(MAX_DEFLATE_RATIO).saturating_add(1024);
-        let mut inflated = Vec::new();
-        // On a corrupt stream, walk what inflated: the parser sees the same bytes first.
-        let _ = DeflateDecoder::new((&mut self.r).take(rest))
-            .take(cap)
-            .read_to_end(&mut inflated);
-        let len = inflated.len() as u64;
+        let mut compressed = Vec::new();
+        (&mut self.r)
+            .take(rest)
+            .read_to_end(&mut compressed)
+            .map_err(|_| Stop::Leave)?;
+        // On a corrupt stream, count what inflated: the parser sees the same bytes first.
+        let mut counter = Stream(DeflateDecoder::new(&compressed[..]));
+        let mut len = 0u64;
+        let mut buf = [0u8; 8192];
+        while let Ok(n @ 1..) = counter.read(&mut buf) {
+            len += n as u64;
+        }
         let mut inner = Walker {
-            r: Cursor::new(inflated),
+            r: Stream(DeflateDecoder::new(&compressed[..])),
+            pending: None,
             pos: 0,
             len,
             name: self.name,
@@ -262,8 +325,7 @@ impl<R: Read + Seek> Walker<'_, R> {
                 // starts with an item tag is one.
                 None if h.len >= 8 && h.tag.0 != 0xFFFE => {
                     let t = self.bytes::<4>()?;
-                    self.r.seek_relative(-4).map_err(|_| Stop::Leave)?;
-                    self.pos -= 4;
+                    self.unread(t);
                     (Self::u16([t[0], t[1]], enc), Self::u16([t[2], t[3]], enc)) == ITEM
                 }
                 None => false,
