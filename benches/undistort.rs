@@ -2,7 +2,7 @@
 //! cv2.initUndistortRectifyMap) and resampling an RGB f32 frame through it (as cv2.remap).
 //! bench/undistort_vs_opencv.py times the same two operations against OpenCV in one run.
 
-use bronchosim::camera::{remap_bilinear, Camera, UndistortMap};
+use bronchosim::camera::{remap_bilinear, Camera, RemapPlan, UndistortMap};
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 
@@ -34,6 +34,14 @@ fn bench(c: &mut Criterion) {
     c.bench_function("remap_rgb_f32_1280x1024", |b| {
         b.iter(|| {
             remap_bilinear(black_box(&img), cam.width, cam.height, 3, &map, 0.0).expect("remap")
+        })
+    });
+    let plan = RemapPlan::new(&map, cam.width, cam.height).expect("plan");
+    let mut out = vec![0f32; w * h * 3];
+    c.bench_function("remap_plan_rgb_f32_1280x1024", |b| {
+        b.iter(|| {
+            plan.remap_into(black_box(&img), 3, 0.0, &mut out)
+                .expect("remap")
         })
     });
 }

@@ -1,9 +1,11 @@
 //! Times the undistortion map and RGB remap of a 1280x1024 frame for
-//! bench/undistort_vs_opencv.py: `undistort_timing [REPS] [both|map|remap]` prints one JSON
-//! line with the median milliseconds per operation (0 for an operation not timed; the
-//! single-operation modes are for profiling one of them with `perf`).
+//! bench/undistort_vs_opencv.py: `undistort_timing [REPS] [both|map|remap|reuse]` prints one
+//! JSON line with the median milliseconds per operation (0 for an operation not timed; the
+//! single-operation modes are for profiling one of them with `perf`): map_ms
+//! (UndistortMap::for_camera), remap_ms (remap_bilinear), plan_ms (RemapPlan::new) and
+//! reuse_ms (RemapPlan::remap_into a preallocated frame).
 
-use bronchosim::camera::{remap_bilinear, Camera, UndistortMap};
+use bronchosim::camera::{remap_bilinear, Camera, RemapPlan, UndistortMap};
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -45,7 +47,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let mode = std::env::args().nth(2).unwrap_or_else(|| "both".into());
     let reps_for = |op: &str| {
-        if mode == "both" || mode == op {
+        if mode == "both" || mode == "all" || mode == op {
             reps
         } else {
             0
@@ -62,8 +64,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             remap_bilinear(black_box(&img), cam.width, cam.height, 3, &map, 0.0).expect("remap"),
         );
     });
+    let plan_ms = median_ms(reps_for("reuse"), || {
+        black_box(RemapPlan::new(black_box(&map), cam.width, cam.height).expect("plan"));
+    });
+    let plan = RemapPlan::new(&map, cam.width, cam.height)?;
+    let mut out = vec![0f32; w * h * 3];
+    let reuse_ms = median_ms(reps_for("reuse"), || {
+        plan.remap_into(black_box(&img), 3, 0.0, &mut out)
+            .expect("remap");
+        black_box(&out);
+    });
     println!(
-        "{{\"map_ms\": {map_ms:.4}, \"remap_ms\": {remap_ms:.4}, \"threads\": {}}}",
+        "{{\"map_ms\": {map_ms:.4}, \"remap_ms\": {remap_ms:.4}, \"plan_ms\": {plan_ms:.4}, \"reuse_ms\": {reuse_ms:.4}, \"threads\": {}}}",
         rayon::current_num_threads()
     );
     Ok(())

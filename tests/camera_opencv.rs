@@ -1,7 +1,7 @@
 //! The camera model against OpenCV reference values (scripts/reference/camera_opencv.py →
 //! tests/data/camera_opencv.json), undistortion round trips, camera files and their errors.
 
-use bronchosim::camera::{remap_bilinear, Camera, UndistortMap};
+use bronchosim::camera::{remap_bilinear, Camera, RemapPlan, UndistortMap};
 use bronchosim::io::camera_file::{find_camera, read_camera, write_camera_json};
 use bronchosim::math::{Point2, Point3};
 use serde_json::Value;
@@ -273,8 +273,18 @@ fn remap_is_exact_on_a_linear_image_and_fills_outside() {
     );
     assert!(remap_bilinear(&src[1..], cam.width, cam.height, 3, &map, 0.0).is_err());
 
-    // Other channel counts (1 and 5 take different code paths) give the same per channel.
-    for channels in [1usize, 5] {
+    // A RemapPlan built once gives the same image, also into a reused buffer; wrong sizes fail.
+    let plan = RemapPlan::new(&map, cam.width, cam.height).expect("plan");
+    assert_eq!(plan.remap(&src, 3, -7.0).expect("plan remap"), out);
+    let mut again = vec![f32::NAN; out.len()];
+    plan.remap_into(&src, 3, -7.0, &mut again)
+        .expect("remap_into");
+    assert_eq!(again, out);
+    assert!(plan.remap_into(&src, 3, -7.0, &mut again[1..]).is_err());
+    assert!(plan.remap(&src[3..], 3, -7.0).is_err());
+
+    // Other channel counts (1, 4 and 5 take different code paths) give the same per channel.
+    for channels in [1usize, 4, 5] {
         let img: Vec<f32> = (0..w * h * channels)
             .map(|i| {
                 let (p, k) = (i / channels, i % channels);
@@ -282,6 +292,7 @@ fn remap_is_exact_on_a_linear_image_and_fills_outside() {
             })
             .collect();
         let got = remap_bilinear(&img, cam.width, cam.height, channels, &map, -7.0).expect("remap");
+        assert_eq!(plan.remap(&img, channels, -7.0).expect("plan remap"), got);
         for i in (0..w * h).filter(|&i| mask[i]) {
             for k in 0..channels {
                 let want = map.map_x[i] + k as f32 * map.map_y[i];

@@ -284,8 +284,9 @@ fn non_dicom_file_fails() {
 #[test]
 fn corrupted_bytes_never_panic() {
     // Seeded byte corruption of one slice (a poor man's fuzzer until cargo-fuzz targets exist):
-    // every outcome must be Ok or an Err naming a file, never a panic. Kept to 100 cases: a
-    // corrupted element length makes dicom-parser 0.10 zero-fill up to 4 GB before it fails.
+    // every outcome must be Ok or an Err naming a file, never a panic. 1000 cases take well
+    // under a second now that corrupt element lengths are rejected before dicom-parser would
+    // zero-fill up to 4 GB for them (cargo-fuzz target `dicom` does the thorough job).
     let files: Vec<(PathBuf, Vec<u8>)> = ["axial", "axial_rle"]
         .iter()
         .flat_map(|s| std::fs::read_dir(data(s)).unwrap().take(3))
@@ -303,7 +304,7 @@ fn corrupted_bytes_never_panic() {
         state
     };
     let (mut ok, mut err) = (0, 0);
-    for _ in 0..100 {
+    for _ in 0..1000 {
         let f = (next() % files.len() as u64) as usize;
         let mut bytes = files[f].1.clone();
         for _ in 0..1 + next() % 4 {
@@ -336,4 +337,132 @@ fn corrupted_bytes_never_panic() {
         ok > 0 && err > 0,
         "corruption should sometimes be harmless and sometimes fatal: {ok} ok, {err} err"
     );
+}
+
+/// Position of the first occurrence of `needle` in `hay`.
+fn find(hay: &[u8], needle: &[u8]) -> usize {
+    hay.windows(needle.len())
+        .position(|w| w == needle)
+        .expect("pattern in test file")
+}
+
+/// Read one in-memory slice and return the error message and the time it took.
+fn read_one_corrupt(name: &str, bytes: Vec<u8>) -> (String, std::time::Duration) {
+    let start = std::time::Instant::now();
+    let err = read_dicom_series_from_memory(&[(PathBuf::from(name), bytes)])
+        .expect_err(name)
+        .to_string();
+    (err, start.elapsed())
+}
+
+#[test]
+fn huge_element_length_fails_fast() {
+    // dicom-parser 0.10 zero-fills a declared length before reading it (up to 4 GB, seconds);
+    // the reader's pre-scan must reject such lengths at once, naming the file and element.
+    let good = std::fs::read(data("axial").join("IM0000.dcm")).unwrap();
+    // Explicit VR little endian; tags stored as group then element, each little endian.
+    let pixel_tag = [0xE0, 0x7F, 0x10, 0x00];
+    let before_name = [0x10, 0x00, 0x10, 0x00]; // (0010,0010) PatientName
+
+    // 1. PixelData (OW, 32-bit length) claims 4 GB: reached only by the full parse.
+    let mut pixels = good.clone();
+    let at = find(&pixels, &pixel_tag) + 8;
+    pixels[at..at + 4].copy_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+
+    // 2. A private UT element in the header claims 4 GB: reached by the header parse.
+    let mut header = good.clone();
+    let at = find(&header, &before_name);
+    let mut ut = vec![0x09, 0x00, 0x01, 0x10, b'U', b'T', 0, 0];
+    ut.extend_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+    ut.extend_from_slice(b"ABCD");
+    header.splice(at..at, ut);
+
+    // 3. The same inside an item of an undefined-length sequence.
+    let mut nested = good.clone();
+    let at = find(&nested, &before_name);
+    let mut sq = vec![
+        0x09, 0x00, 0x02, 0x10, b'S', b'Q', 0, 0, 0xFF, 0xFF, 0xFF, 0xFF,
+    ];
+    sq.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0, 0xFF, 0xFF, 0xFF, 0xFF]); // item, undefined
+    sq.extend_from_slice(&[0x09, 0x00, 0x03, 0x10, b'O', b'B', 0, 0]);
+    sq.extend_from_slice(&0x8000_0000u32.to_le_bytes());
+    nested.splice(at..at, sq);
+
+    for (name, bytes, tag) in [
+        ("pixels.dcm", pixels, "(7FE0,0010)"),
+        ("header.dcm", header, "(0009,1001)"),
+        ("nested.dcm", nested, "(0009,1003)"),
+    ] {
+        let (err, took) = read_one_corrupt(name, bytes);
+        assert!(
+            err.contains(name) && err.contains(tag) && err.contains("corrupt DICOM element"),
+            "{name}: {err}"
+        );
+        assert!(err.contains("remain in the file"), "{name}: {err}");
+        assert!(
+            took < std::time::Duration::from_secs(1),
+            "{name}: took {took:?}"
+        );
+    }
+}
+
+#[test]
+fn deeply_nested_sequences_fail_cleanly() {
+    // 10 000 nested undefined-length sequences: rejected by depth, not by a stack overflow.
+    let good = std::fs::read(data("axial").join("IM0000.dcm")).unwrap();
+    let at = find(&good, &[0x10, 0x00, 0x10, 0x00]);
+    let mut bytes = good[..at].to_vec();
+    for _ in 0..10_000 {
+        bytes.extend_from_slice(&[
+            0x09, 0x00, 0x02, 0x10, b'S', b'Q', 0, 0, 0xFF, 0xFF, 0xFF, 0xFF,
+        ]);
+        bytes.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0, 0xFF, 0xFF, 0xFF, 0xFF]);
+    }
+    let (err, took) = read_one_corrupt("deep.dcm", bytes);
+    assert!(
+        err.contains("deep.dcm") && err.contains("nested more than 32 deep"),
+        "{err}"
+    );
+    assert!(took < std::time::Duration::from_secs(1), "took {took:?}");
+}
+
+#[test]
+fn corrupt_rle_segments_fail_cleanly() {
+    // Found by cargo-fuzz: dicom-transfer-syntax-registry 0.10 panics on such RLE fragments;
+    // the reader decodes RLE itself and reports them.
+    let good = std::fs::read(data("axial_rle").join("IM0000.dcm")).unwrap();
+    let pixel = find(&good, &[0xE0, 0x7F, 0x10, 0x00]);
+    let item = [0xFE, 0xFF, 0x00, 0xE0];
+    let table = pixel + find(&good[pixel..], &item); // basic offset table item
+    let frag = table + 8 + find(&good[table + 8..], &item); // the frame's fragment item
+    let header = frag + 8; // the 64-byte RLE header: segment count, 15 offsets
+    let frag_len = u32::from_le_bytes(good[frag + 4..frag + 8].try_into().unwrap()) as usize;
+    assert_eq!(
+        u32::from_le_bytes(good[header..header + 4].try_into().unwrap()),
+        2
+    );
+
+    let mut count = good.clone(); // 2^31 segments: would allocate 8 GB of offsets, then panic
+    count[header..header + 4].copy_from_slice(&0x8000_0000u32.to_le_bytes());
+    let mut short = good.clone(); // the LSB segment is 2 bytes: decodes to too few pixels
+    let lsb = (frag_len - 2) as u32;
+    short[header + 8..header + 12].copy_from_slice(&lsb.to_le_bytes());
+    let mut outside = good.clone(); // a segment offset past the fragment
+    outside[header + 8..header + 12].copy_from_slice(&(frag_len as u32 + 10).to_le_bytes());
+    let mut tiny = good[..header].to_vec(); // a fragment shorter than the RLE header
+    tiny[frag + 4..frag + 8].copy_from_slice(&4u32.to_le_bytes());
+    tiny.extend_from_slice(&[2, 0, 0, 0, 0xFE, 0xFF, 0xDD, 0xE0, 0, 0, 0, 0]);
+
+    for (name, bytes, want) in [
+        ("count.dcm", count, "2147483648 segments"),
+        ("short.dcm", short, "decodes to"),
+        ("outside.dcm", outside, "of a"),
+        ("tiny.dcm", tiny, "shorter than the 64-byte header"),
+    ] {
+        let (err, _) = read_one_corrupt(name, bytes);
+        assert!(
+            err.contains(name) && err.contains("corrupt RLE Lossless") && err.contains(want),
+            "{name}: {err}"
+        );
+    }
 }

@@ -6,7 +6,7 @@
 
 mod undistort;
 
-pub use undistort::{remap_bilinear, UndistortMap};
+pub use undistort::{remap_bilinear, RemapPlan, UndistortMap};
 
 use crate::math::{Matrix3, Point2, Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};

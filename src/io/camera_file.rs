@@ -20,31 +20,63 @@ const JSON_DISTORTION: [&str; 5] = ["k1", "k2", "p1", "p2", "k3"];
 /// Names of OpenCV's distortion coefficients after k1 k2 p1 p2 k3.
 const OPENCV_EXTRA: [&str; 9] = ["k4", "k5", "k6", "s1", "s2", "s3", "s4", "tau_x", "tau_y"];
 
+/// The syntax of a camera file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CameraFormat {
+    /// camera.json (CASE_FORMAT.md).
+    Json,
+    /// OpenCV FileStorage YAML.
+    Yaml,
+    /// OpenCV FileStorage XML.
+    Xml,
+}
+
+impl CameraFormat {
+    /// The format named by `path`'s extension: `.json`, `.yml` / `.yaml` or `.xml` (any case).
+    pub fn from_path(path: &Path) -> Result<Self> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase())
+            .unwrap_or_default();
+        match ext.as_str() {
+            "json" => Ok(Self::Json),
+            "yml" | "yaml" => Ok(Self::Yaml),
+            "xml" => Ok(Self::Xml),
+            _ => Err(Error::unsupported(
+                path,
+                "camera file extension must be .json, .yml, .yaml or .xml",
+            )),
+        }
+    }
+}
+
 /// Read a camera file, chosen by extension: `.json` (CASE_FORMAT.md), `.yml` / `.yaml` / `.xml`
 /// (OpenCV FileStorage). The camera is validated ([`Camera::validate`]); every error names the
 /// file and the field.
 pub fn read_camera(path: &Path) -> Result<Camera> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase())
-        .unwrap_or_default();
-    let parse: fn(&Path, &str) -> Result<Camera> = match ext.as_str() {
-        "json" => parse_json,
-        "yml" | "yaml" => parse_yaml,
-        "xml" => parse_xml,
-        _ => {
-            return Err(Error::unsupported(
-                path,
-                "camera file extension must be .json, .yml, .yaml or .xml",
-            ))
-        }
-    };
+    let format = CameraFormat::from_path(path)?;
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    let camera = parse(path, &text)?;
+    parse_camera_str(&text, format, path)
+}
+
+/// Parse and validate the text of a camera file in `format`, as [`read_camera`] does, without
+/// touching the disk; `path_for_errors` only names the source in error messages.
+pub fn parse_camera_str(
+    text: &str,
+    format: CameraFormat,
+    path_for_errors: &Path,
+) -> Result<Camera> {
+    let path = path_for_errors;
+    let camera = match format {
+        CameraFormat::Json => parse_json(path, text),
+        CameraFormat::Yaml => parse_yaml(path, text),
+        CameraFormat::Xml => parse_xml(path, text),
+    }?;
     camera.validate().map_err(|m| {
         // OpenCV files spell the image size image_width / image_height.
-        let opencv = ext != "json" && (m.starts_with("width") || m.starts_with("height"));
+        let opencv =
+            format != CameraFormat::Json && (m.starts_with("width") || m.starts_with("height"));
         Error::invalid(path, if opencv { format!("image_{m}") } else { m })
     })?;
     Ok(camera)

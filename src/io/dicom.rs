@@ -26,6 +26,7 @@
 mod geometry;
 mod header;
 mod pixels;
+mod scan;
 
 use std::path::{Path, PathBuf};
 

@@ -126,8 +126,20 @@ pub fn validate_pose(m: &Affine) -> std::result::Result<(), String> {
 /// the same one; video frame indices strictly increase (frames are decoded in one pass).
 pub fn read_poses(path: &Path, case_dir: &Path) -> Result<Vec<PoseEntry>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    parse_poses_str(&text, case_dir, path)
+}
+
+/// Parse and validate the text of a poses.json, as [`read_poses`] does, without reading it from
+/// disk; `"image"` paths are still resolved inside `case_dir`, and `path_for_errors` only names
+/// the source in error messages.
+pub fn parse_poses_str(
+    text: &str,
+    case_dir: &Path,
+    path_for_errors: &Path,
+) -> Result<Vec<PoseEntry>> {
+    let path = path_for_errors;
     // serde_json refuses numbers that overflow f64 (1e400) with "number out of range".
-    let root: Value = serde_json::from_str(&text)
+    let root: Value = serde_json::from_str(text)
         .map_err(|e| Error::invalid(path, format!("not valid JSON: {e}")))?;
     let frames = root
         .as_object()

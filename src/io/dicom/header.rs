@@ -34,6 +34,19 @@ impl<'a> Source<'a> {
         }
     }
 
+    /// Walk the element headers of the whole file (not decoding values) and fail when a
+    /// declared length runs past its end: dicom-parser would zero-fill up to 4 GB first.
+    pub(crate) fn check_lengths(&self) -> Result<()> {
+        match *self {
+            Source::File(p) => {
+                let file = std::fs::File::open(p).map_err(|e| Error::io(p, e))?;
+                let len = file.metadata().map_err(|e| Error::io(p, e))?.len();
+                super::scan::check_lengths(std::io::BufReader::new(file), len, p)
+            }
+            Source::Memory(p, b) => super::scan::check_lengths(Cursor::new(b), b.len() as u64, p),
+        }
+    }
+
     /// A reader positioned at the `DICM` marker, after checking that the marker is at byte 128.
     fn open_after_preamble(&self) -> Result<Box<dyn Read + 'a>> {
         let mut reader: Box<dyn Read + 'a> = match *self {
@@ -225,6 +238,8 @@ impl SliceHeader {
     pub(crate) fn read(src: Source<'_>) -> Result<Self> {
         let name = src.name();
         let file_len = src.len()?;
+        // Also covers the pixel data, which decode_slice parses later without checking again.
+        src.check_lengths()?;
         let obj = src.open(true)?;
         let transfer_syntax = obj
             .meta()

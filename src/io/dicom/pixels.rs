@@ -6,10 +6,14 @@ use dicom_pixeldata::PixelDecoder;
 use super::header::{describe_syntax, SliceHeader, Source};
 use crate::{Error, Result};
 
+const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
+
 /// Decode the pixels of `src` (whose header is `h`) into `out` (one slice, i fastest), applying
 /// BitsStored/HighBit masking, sign extension and RescaleSlope/Intercept.
 pub(crate) fn decode_slice(src: Source<'_>, h: &SliceHeader, out: &mut [f32]) -> Result<()> {
     let name = src.name();
+    // SliceHeader::read has checked every element length (pixel data included) against the
+    // file size, so this full parse cannot be made to allocate gigabytes.
     let obj = src.open(false)?;
     let decode_error = |e: &dyn std::fmt::Display| {
         Error::invalid(
@@ -23,7 +27,27 @@ pub(crate) fn decode_slice(src: Source<'_>, h: &SliceHeader, out: &mut [f32]) ->
     // Native (unencapsulated) pixel data is used in place: decode_pixel_data would copy it.
     let native;
     let decoded;
-    let bytes: &[u8] = if h.encapsulated {
+    let rle;
+    let bytes: &[u8] = if h.transfer_syntax == RLE_LOSSLESS {
+        // Our own decoder: dicom-transfer-syntax-registry 0.10's panics on a short fragment
+        // or a segment that decodes to fewer bytes than the image (found by cargo-fuzz).
+        let element = obj
+            .get(tags::PIXEL_DATA)
+            .ok_or_else(|| Error::invalid(name, "missing PixelData"))?;
+        let fragments = element.value().fragments().unwrap_or(&[]);
+        let [fragment] = fragments else {
+            return Err(Error::invalid(
+                name,
+                format!(
+                    "RLE Lossless pixel data must be one fragment for one frame, found {}",
+                    fragments.len()
+                ),
+            ));
+        };
+        rle = decode_rle(fragment, out.len(), (h.bits_allocated / 8) as usize)
+            .map_err(|m| Error::invalid(name, format!("corrupt RLE Lossless pixel data: {m}")))?;
+        &rle
+    } else if h.encapsulated {
         decoded = obj.decode_pixel_data().map_err(|e| decode_error(&e))?;
         decoded.data()
     } else {
@@ -78,4 +102,84 @@ pub(crate) fn decode_slice(src: Source<'_>, h: &SliceHeader, out: &mut [f32]) ->
         }
     }
     Ok(())
+}
+
+/// Decode one RLE Lossless frame (DICOM PS3.5 Annex G) of `pixels` single-sample pixels of
+/// `bytes_per` bytes into little-endian pixel bytes. Segment k holds byte k of every pixel,
+/// most significant first; each is PackBits-coded. Every malformation is an error message.
+fn decode_rle(
+    fragment: &[u8],
+    pixels: usize,
+    bytes_per: usize,
+) -> std::result::Result<Vec<u8>, String> {
+    if fragment.len() < 64 {
+        return Err(format!(
+            "fragment of {} bytes is shorter than the 64-byte header",
+            fragment.len()
+        ));
+    }
+    let word = |i: usize| {
+        u32::from_le_bytes(fragment[4 * i..4 * i + 4].try_into().expect("4 bytes")) as usize
+    };
+    let segments = word(0);
+    if segments != bytes_per {
+        return Err(format!(
+            "{segments} segments for {} bits per pixel, expected {bytes_per}",
+            bytes_per * 8
+        ));
+    }
+    let mut out = vec![0u8; pixels * bytes_per];
+    for k in 0..segments {
+        let start = word(1 + k);
+        let end = if k + 1 < segments {
+            word(2 + k)
+        } else {
+            fragment.len()
+        };
+        let segment = fragment
+            .get(start..end)
+            .filter(|_| start >= 64)
+            .ok_or_else(|| {
+                format!(
+                    "segment {k} spans bytes {start}..{end} of a {}-byte fragment",
+                    fragment.len()
+                )
+            })?;
+        // Byte k of the big-endian sample goes to little-endian position bytes_per - 1 - k.
+        let lane = bytes_per - 1 - k;
+        let mut n = 0; // pixels decoded
+        let mut i = 0;
+        let mut put = |b: u8, n: &mut usize| {
+            if *n < pixels {
+                out[*n * bytes_per + lane] = b;
+                *n += 1;
+            }
+        };
+        while i < segment.len() && n < pixels {
+            let control = segment[i] as i8;
+            i += 1;
+            if control >= 0 {
+                let count = control as usize + 1;
+                let literal = segment
+                    .get(i..i + count)
+                    .ok_or_else(|| format!("segment {k} ends inside a literal run"))?;
+                for &b in literal {
+                    put(b, &mut n);
+                }
+                i += count;
+            } else if control != -128 {
+                let b = *segment
+                    .get(i)
+                    .ok_or_else(|| format!("segment {k} ends inside a repeat run"))?;
+                i += 1;
+                for _ in 0..(1 - control as isize) {
+                    put(b, &mut n);
+                }
+            }
+        }
+        if n < pixels {
+            return Err(format!("segment {k} decodes to {n} of {pixels} pixels"));
+        }
+    }
+    Ok(out)
 }
