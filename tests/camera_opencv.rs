@@ -273,13 +273,21 @@ fn remap_is_exact_on_a_linear_image_and_fills_outside() {
     );
     assert!(remap_bilinear(&src[1..], cam.width, cam.height, 3, &map, 0.0).is_err());
 
-    // A RemapPlan built once gives the same image, also into a reused buffer; wrong sizes fail.
+    // A RemapPlan built once gives the same image up to its weights' rounding to 1/65536 px
+    // (under 1e-4 here, inside the f32 bound), also into a reused buffer; wrong sizes fail.
     let plan = RemapPlan::new(&map, cam.width, cam.height).expect("plan");
-    assert_eq!(plan.remap(&src, 3, -7.0).expect("plan remap"), out);
+    let planned = plan.remap(&src, 3, -7.0).expect("plan remap");
+    let diff = |a: &[f32], b: &[f32]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0f32, f32::max)
+    };
+    assert!(diff(&planned, &out) < 2e-3, "{}", diff(&planned, &out));
     let mut again = vec![f32::NAN; out.len()];
     plan.remap_into(&src, 3, -7.0, &mut again)
         .expect("remap_into");
-    assert_eq!(again, out);
+    assert_eq!(again, planned);
     assert!(plan.remap_into(&src, 3, -7.0, &mut again[1..]).is_err());
     assert!(plan.remap(&src[3..], 3, -7.0).is_err());
 
@@ -292,7 +300,8 @@ fn remap_is_exact_on_a_linear_image_and_fills_outside() {
             })
             .collect();
         let got = remap_bilinear(&img, cam.width, cam.height, channels, &map, -7.0).expect("remap");
-        assert_eq!(plan.remap(&img, channels, -7.0).expect("plan remap"), got);
+        let planned = plan.remap(&img, channels, -7.0).expect("plan remap");
+        assert!(diff(&planned, &got) < 4e-3, "{channels} channels");
         for i in (0..w * h).filter(|&i| mask[i]) {
             for k in 0..channels {
                 let want = map.map_x[i] + k as f32 * map.map_y[i];
