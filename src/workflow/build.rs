@@ -195,9 +195,9 @@ pub fn r_squared(s: &SampleSet, m: &PsiModel) -> [f64; 3] {
         let vals = &s.rgb[ch];
         let mean = vals.iter().map(|&v| v as f64).sum::<f64>() / vals.len().max(1) as f64;
         let (mut ss_res, mut ss_tot) = (0.0, 0.0);
-        for i in 0..s.len() {
-            let p = m.eval(ch, s.gamma[i] as f64, s.z[i] as f64);
-            let v = vals[i] as f64;
+        for ((&g, &z), &v) in s.gamma.iter().zip(&s.z).zip(vals.iter()) {
+            let p = m.eval(ch, g as f64, z as f64);
+            let v = v as f64;
             ss_res += (v - p) * (v - p);
             ss_tot += (v - mean) * (v - mean);
         }

@@ -71,11 +71,11 @@ fn shading_and_texture(f: &ReportFrame) -> (Frame, Frame) {
     let mut tex_vals: Vec<f32> = Vec::new();
     for (i, v) in vals.iter().enumerate() {
         if let Some(p) = v {
-            for ch in 0..3 {
-                let s = (p[ch] / max_shade.max(1e-12)) as f32;
+            for (ch, &pc) in p.iter().enumerate() {
+                let s = (pc / max_shade.max(1e-12)) as f32;
                 shade.rgb[3 * i + ch] = s;
-                if p[ch] > 1e-6 {
-                    let t = f.frame.rgb[3 * i + ch] / p[ch] as f32;
+                if pc > 1e-6 {
+                    let t = f.frame.rgb[3 * i + ch] / pc as f32;
                     tex.rgb[3 * i + ch] = t;
                     tex_vals.push(t);
                 }
