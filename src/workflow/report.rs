@@ -70,11 +70,14 @@ fn shading_and_texture(f: &ReportFrame) -> (Frame, Frame) {
     }
     let mut tex_vals: Vec<f32> = Vec::new();
     for (i, v) in vals.iter().enumerate() {
+        // Where Psi predicts little light (far down the airway) its quotient is noise: the
+        // texture stage drops those observations too (DelightOptions::min_relative_weight).
         if let Some(p) = v {
+            let lit = p[1] >= 0.05 * max_shade;
             for (ch, &pc) in p.iter().enumerate() {
                 let s = (pc / max_shade.max(1e-12)) as f32;
                 shade.rgb[3 * i + ch] = s;
-                if pc > 1e-6 {
+                if lit && pc > 1e-6 {
                     let t = f.frame.rgb[3 * i + ch] / pc as f32;
                     tex.rgb[3 * i + ch] = t;
                     tex_vals.push(t);
