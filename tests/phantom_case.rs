@@ -212,13 +212,14 @@ fn phantom_case_is_deterministic_in_air_well_exposed_and_consistent() {
 /// A real ATM'22 tree (downsampled twice, ~4 s): the camera stays in air and descends.
 #[test]
 fn phantom_from_a_real_mask() {
+    // shared/ sits beside the repository (CI clones main with shared/ next to it).
     let mask = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/atm22-airways/ATM_305_airway_mask.nii.gz");
-    let mask = if mask.exists() {
-        mask
-    } else {
-        PathBuf::from("/work/shared/data/atm22-airways/ATM_305_airway_mask.nii.gz")
-    };
+        .join("../shared/data/atm22-airways/ATM_305_airway_mask.nii.gz");
+    assert!(
+        mask.exists(),
+        "{}: missing (the ATM'22 masks are needed for this test)",
+        mask.display()
+    );
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("case");
     let mut o = small(5);
