@@ -4,7 +4,6 @@
 //! inspect → segment → lumen mesh → atlas → per frame (ray cast, samples, Psi fit) →
 //! de-light and fuse (two streaming passes over the frames) → model folder.
 
-use crate::camera::Camera;
 use crate::io::case::Case;
 use crate::io::frame_source::FrameSource;
 use crate::io::frames::Frame;
@@ -12,6 +11,10 @@ use crate::io::nifti::write_nifti;
 use crate::io::output_dir::OutputDir;
 use crate::io::poses::PoseEntry;
 use crate::math::Affine;
+use crate::model::manifest::{
+    BuildTimings, FrameFit, ModelCounts, ModelInputs, ModelManifest, ShadingFile,
+    MODEL_FORMAT_VERSION,
+};
 use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
 use crate::shading::fit::{fit_psi, FitOptions};
 use crate::shading::psi::PsiModel;
@@ -30,9 +33,6 @@ use serde::Serialize;
 use std::path::Path;
 use std::time::Instant;
 
-/// Version of the model folder layout (model.json `format_version`).
-pub const MODEL_FORMAT_VERSION: u32 = 1;
-
 /// Options of the whole build; every stage's options with their defaults.
 #[derive(Clone, Debug, Default)]
 pub struct BuildOptions {
@@ -50,112 +50,6 @@ pub struct BuildOptions {
     pub force: bool,
     /// No progress bars.
     pub quiet: bool,
-}
-
-/// Fit quality of one frame.
-#[derive(Clone, Debug, Serialize)]
-pub struct FrameFit {
-    /// Frame index (poses order).
-    pub frame: usize,
-    /// Samples used in the fit.
-    pub samples: usize,
-    /// Weighted RMS residual per channel (linear intensity).
-    pub rms: [f64; 3],
-    /// Coefficient of determination of Psi against the samples, per channel.
-    pub r2: [f64; 3],
-    /// True when the positivity-constrained fallback was used in some channel.
-    pub constrained: bool,
-}
-
-/// Seconds per stage.
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct BuildTimings {
-    /// Reading and validating the case.
-    pub read_case: f64,
-    /// Region growing and morphology.
-    pub segment: f64,
-    /// Marching cubes, smoothing, decimation.
-    pub mesh: f64,
-    /// Atlas and texel rasterisation.
-    pub atlas: f64,
-    /// Per-frame ray cast, samples and Psi fit (all frames).
-    pub fit: f64,
-    /// De-lighting and fusion (all frames, both passes).
-    pub fusion: f64,
-    /// Writing the model folder and the report.
-    pub write: f64,
-    /// Everything.
-    pub total: f64,
-}
-
-/// model.json: the manifest of a model folder.
-#[derive(Clone, Debug, Serialize)]
-pub struct ModelManifest {
-    /// Layout version of the folder.
-    pub format_version: u32,
-    /// bronchosim version that wrote it.
-    pub generator: String,
-    /// Input files.
-    pub inputs: ModelInputs,
-    /// Sizes of what was built.
-    pub counts: ModelCounts,
-    /// Seconds per stage.
-    pub timings: BuildTimings,
-    /// Fit quality per frame.
-    pub fit_quality: Vec<FrameFit>,
-    /// Mean R² of Psi over frames and channels.
-    pub mean_r2: f64,
-    /// The camera of the training frames.
-    pub camera: Camera,
-    /// Scale from the fused (relative) albedo to albedo.png's linear values.
-    pub albedo_scale: f32,
-    /// Mean L2 stretch of the atlas.
-    pub atlas_mean_l2_stretch: f64,
-    /// Atlas utilisation (covered / all texels).
-    pub atlas_utilisation: f64,
-}
-
-/// Input files of a model.
-#[derive(Clone, Debug, Serialize)]
-pub struct ModelInputs {
-    /// The case folder.
-    pub case: String,
-    /// The CT.
-    pub ct: String,
-    /// The camera file.
-    pub camera: String,
-    /// poses.json.
-    pub poses: String,
-    /// frames/ or the video.
-    pub frames: String,
-}
-
-/// Sizes of a model.
-#[derive(Clone, Debug, Serialize)]
-pub struct ModelCounts {
-    /// Frames used.
-    pub frames: usize,
-    /// Lumen mesh triangles.
-    pub triangles: usize,
-    /// Atlas size in texels.
-    pub atlas_size: [u32; 2],
-    /// Texels on a chart.
-    pub chart_texels: usize,
-    /// Texels seen by at least one frame.
-    pub covered_texels: usize,
-    /// Atlas charts.
-    pub charts: usize,
-    /// Segmented airway volume (ml).
-    pub airway_volume_ml: f64,
-}
-
-/// shading.json.
-#[derive(Clone, Debug, Serialize, serde::Deserialize)]
-pub struct ShadingFile {
-    /// "paper": one Psi per viewpoint (Chung et al. 2004, eq. 2–5).
-    pub model: String,
-    /// The fitted viewpoints, in frame order.
-    pub viewpoints: Vec<PsiModel>,
 }
 
 /// The pixels of a frame that obey the model, and the fitted Psi.
@@ -348,7 +242,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     let fused = fuse(&texels, &mut stream, &opts.fusion)?;
     stream.progress.finish();
     let mut filled = fused.filled(&texels)?;
-    colour_balance(&mut filled, &fused.covered, pixel_sum);
+    let colour_balance = colour_balance(&mut filled, &fused.covered, pixel_sum);
     timings.fusion = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -384,6 +278,9 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         mean_r2,
         camera: case.camera,
         albedo_scale: tex.albedo_scale,
+        colour_balance,
+        texel_mm: opts.atlas.texel_mm,
+        shading_model: "paper".into(),
         atlas_mean_l2_stretch: atlas.stats.mean_l2_stretch,
         atlas_utilisation: atlas.stats.utilisation,
     };
@@ -405,7 +302,8 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
 
 /// Scale each channel of the fused texture so its mean over the covered texels has the
 /// chromaticity of the mean observed pixel (the per-channel Psi divided it out).
-fn colour_balance(rgb: &mut [f32], covered: &[bool], pixel_sum: [f64; 3]) {
+/// Returns the factors applied.
+fn colour_balance(rgb: &mut [f32], covered: &[bool], pixel_sum: [f64; 3]) -> [f32; 3] {
     let mut tex_sum = [0f64; 3];
     for (i, _) in covered.iter().enumerate().filter(|(_, &c)| c) {
         for ch in 0..3 {
@@ -415,24 +313,23 @@ fn colour_balance(rgb: &mut [f32], covered: &[bool], pixel_sum: [f64; 3]) {
     let pix_mean = (pixel_sum[0] + pixel_sum[1] + pixel_sum[2]) / 3.0;
     let tex_mean = (tex_sum[0] + tex_sum[1] + tex_sum[2]) / 3.0;
     if !(pix_mean > 0.0 && tex_mean > 0.0) {
-        return;
+        return [1.0; 3];
     }
-    let k: Vec<f32> = (0..3)
-        .map(|ch| {
-            let want = pixel_sum[ch] / pix_mean;
-            let have = tex_sum[ch] / tex_mean;
-            if have > 0.0 {
-                (want / have) as f32
-            } else {
-                1.0
-            }
-        })
-        .collect();
+    let k: [f32; 3] = std::array::from_fn(|ch| {
+        let want = pixel_sum[ch] / pix_mean;
+        let have = tex_sum[ch] / tex_mean;
+        if have > 0.0 {
+            (want / have) as f32
+        } else {
+            1.0
+        }
+    });
     for px in rgb.chunks_exact_mut(3) {
         for ch in 0..3 {
             px[ch] *= k[ch];
         }
     }
+    k
 }
 
 /// A frame's file name (PNG) or index (video), for messages.

@@ -2,8 +2,9 @@
 //! camera, and the truth), builds the model from it, and says where to look.
 
 use crate::io::output_dir::OutputDir;
+use crate::model::ModelManifest;
 use crate::phantom::{write_phantom_case, PhantomOptions};
-use crate::workflow::build::{build_model, BuildOptions, ModelManifest};
+use crate::workflow::build::{build_model, BuildOptions};
 use crate::Result;
 use std::path::{Path, PathBuf};
 

@@ -4,11 +4,11 @@
 //! video and per-stage timings.
 
 use crate::io::frames::{write_png_srgb8, Frame};
+use crate::model::ModelManifest;
 use crate::raycast::GBuffer;
 use crate::shading::plots::{plot_psi_slices, plot_samples_density};
 use crate::shading::psi::PsiModel;
 use crate::shading::samples::SampleSet;
-use crate::workflow::build::ModelManifest;
 use crate::{Error, Result};
 use base64::Engine;
 use std::fmt::Write as _;

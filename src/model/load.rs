@@ -1,0 +1,128 @@
+//! Loading a model folder for new views: the lumen mesh and UVs from airway.glb (exactly what a
+//! simulator or browser loads), the albedo embedded in it, the shading from shading.json and
+//! the numbers that tie them together from model.json.
+
+use std::path::{Path, PathBuf};
+
+use super::manifest::{ModelManifest, ShadingFile, MODEL_FORMAT_VERSION};
+use crate::io::frames::decode_png_bytes;
+use crate::io::glb_import::read_glb;
+use crate::mesh::TriMesh;
+use crate::raycast::Scene;
+use crate::render::{MipOptions, MipTexture, RenderInputs, ViewpointIndex};
+use crate::{Error, Result};
+
+/// A built model, ready to render.
+pub struct Model {
+    /// The model folder.
+    pub dir: PathBuf,
+    /// model.json.
+    pub manifest: ModelManifest,
+    /// shading.json.
+    pub shading: ShadingFile,
+    /// The lumen mesh with seam vertices merged (smooth normals), triangles in the GLB's order.
+    pub mesh: TriMesh,
+    /// UV corners of every triangle (atlas convention, [0, 1]).
+    pub tri_uv: Vec<[[f32; 2]; 3]>,
+    /// The relative albedo the shading multiplies (linear), with its mip chain.
+    pub texture: MipTexture,
+    /// The mesh, ready for ray casting.
+    pub scene: Scene,
+    /// Centres and directions of the fitted viewpoints.
+    pub index: ViewpointIndex,
+}
+
+/// Read and parse a JSON file of the model folder.
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => Error::missing(path, what.to_string()),
+        _ => Error::io(path, e),
+    })?;
+    serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("{what}: {e}")))
+}
+
+impl Model {
+    /// Load the model folder `dir` (written by `bronchosim build`).
+    pub fn load(dir: &Path) -> Result<Model> {
+        if !dir.is_dir() {
+            return Err(Error::missing(
+                dir,
+                "a model folder (from `bronchosim build`)",
+            ));
+        }
+        let mpath = dir.join("model.json");
+        let version: serde_json::Value = read_json(&mpath, "the model manifest")?;
+        match version.get("format_version").and_then(|v| v.as_u64()) {
+            Some(v) if v == MODEL_FORMAT_VERSION as u64 => {}
+            Some(v) => {
+                return Err(Error::unsupported(
+                    &mpath,
+                    format!(
+                        "model format_version {v}; this bronchosim reads version \
+                         {MODEL_FORMAT_VERSION} (rebuild the model with this version)"
+                    ),
+                ))
+            }
+            None => return Err(Error::invalid(&mpath, "no format_version")),
+        }
+        let manifest: ModelManifest = read_json(&mpath, "the model manifest")?;
+        let spath = dir.join("shading.json");
+        let shading: ShadingFile = read_json(&spath, "the shading model")?;
+        if shading.viewpoints.is_empty() {
+            return Err(Error::invalid(&spath, "no fitted viewpoints"));
+        }
+        let gpath = dir.join("airway.glb");
+        let glb = read_glb(&gpath)?;
+        let uvs = glb
+            .uvs
+            .ok_or_else(|| Error::invalid(&gpath, "the mesh has no TEXCOORD_0"))?;
+        let png = glb
+            .texture_png
+            .ok_or_else(|| Error::invalid(&gpath, "no embedded base colour texture"))?;
+        let mut image = decode_png_bytes(&png, &gpath)?;
+        let b = manifest.colour_balance;
+        let s = manifest.albedo_scale;
+        if !(s > 0.0 && b.iter().all(|&k| k > 0.0 && k.is_finite())) {
+            return Err(Error::invalid(
+                &mpath,
+                format!("albedo_scale {s} and colour_balance {b:?} must be positive"),
+            ));
+        }
+        for px in image.rgb.chunks_exact_mut(3) {
+            for ch in 0..3 {
+                px[ch] /= s * b[ch];
+            }
+        }
+        let texture = MipTexture::new(&image, None, manifest.texel_mm, &MipOptions::default())?;
+        let tri_uv = glb
+            .mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| uvs[v as usize]))
+            .collect();
+        let (mesh, _) = glb.mesh.welded();
+        let scene = Scene::new(&mesh)?;
+        let index = ViewpointIndex::new(&shading.viewpoints);
+        Ok(Model {
+            dir: dir.to_path_buf(),
+            manifest,
+            shading,
+            mesh,
+            tri_uv,
+            texture,
+            scene,
+            index,
+        })
+    }
+
+    /// What [`crate::render::render_view`] needs.
+    pub fn render_inputs(&self) -> RenderInputs<'_> {
+        RenderInputs {
+            scene: &self.scene,
+            tri_uv: &self.tri_uv,
+            texture: &self.texture,
+            psi: &self.shading.viewpoints,
+            index: &self.index,
+        }
+    }
+}

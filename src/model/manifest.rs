@@ -1,0 +1,127 @@
+//! The model folder's manifest (model.json) and shading file (shading.json): the plain data
+//! `build` writes and `render`, `flythrough` and `evaluate` read back.
+
+use serde::{Deserialize, Serialize};
+
+use crate::camera::Camera;
+use crate::shading::psi::PsiModel;
+
+/// Version of the model folder layout (model.json `format_version`).
+///
+/// 2: `texel_mm`, `colour_balance` and `shading_model` in model.json (what the renderer needs
+/// to reproduce the training frames' intensities from airway.glb and shading.json).
+pub const MODEL_FORMAT_VERSION: u32 = 2;
+
+/// Fit quality of one frame.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FrameFit {
+    /// Frame index (poses order).
+    pub frame: usize,
+    /// Samples used in the fit.
+    pub samples: usize,
+    /// Weighted RMS residual per channel (linear intensity).
+    pub rms: [f64; 3],
+    /// Coefficient of determination of Psi against the samples, per channel.
+    pub r2: [f64; 3],
+    /// True when the positivity-constrained fallback was used in some channel.
+    pub constrained: bool,
+}
+
+/// Seconds per stage.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct BuildTimings {
+    /// Reading and validating the case.
+    pub read_case: f64,
+    /// Region growing and morphology.
+    pub segment: f64,
+    /// Marching cubes, smoothing, decimation.
+    pub mesh: f64,
+    /// Atlas and texel rasterisation.
+    pub atlas: f64,
+    /// Per-frame ray cast, samples and Psi fit (all frames).
+    pub fit: f64,
+    /// De-lighting and fusion (all frames, both passes).
+    pub fusion: f64,
+    /// Writing the model folder and the report.
+    pub write: f64,
+    /// Everything.
+    pub total: f64,
+}
+
+/// model.json: the manifest of a model folder.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ModelManifest {
+    /// Layout version of the folder.
+    pub format_version: u32,
+    /// bronchosim version that wrote it.
+    pub generator: String,
+    /// Input files.
+    pub inputs: ModelInputs,
+    /// Sizes of what was built.
+    pub counts: ModelCounts,
+    /// Seconds per stage.
+    pub timings: BuildTimings,
+    /// Fit quality per frame.
+    pub fit_quality: Vec<FrameFit>,
+    /// Mean R² of Psi over frames and channels.
+    pub mean_r2: f64,
+    /// The camera of the training frames.
+    pub camera: Camera,
+    /// Scale from the fused (relative) albedo to albedo.png's linear values (all channels).
+    pub albedo_scale: f32,
+    /// Per-channel factors the build multiplied the fused albedo by so that albedo.png has the
+    /// colour of the mucosa (the per-channel shading divides each channel's mean out). The
+    /// texture the shading multiplies is `albedo.png (linear) / (albedo_scale · colour_balance)`.
+    pub colour_balance: [f32; 3],
+    /// Texel edge length of the atlas on the surface (mm).
+    pub texel_mm: f64,
+    /// The shading model new views use by default ("paper" or "calibrated").
+    pub shading_model: String,
+    /// Mean L2 stretch of the atlas.
+    pub atlas_mean_l2_stretch: f64,
+    /// Atlas utilisation (covered / all texels).
+    pub atlas_utilisation: f64,
+}
+
+/// Input files of a model.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ModelInputs {
+    /// The case folder.
+    pub case: String,
+    /// The CT.
+    pub ct: String,
+    /// The camera file.
+    pub camera: String,
+    /// poses.json.
+    pub poses: String,
+    /// frames/ or the video.
+    pub frames: String,
+}
+
+/// Sizes of a model.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ModelCounts {
+    /// Frames used.
+    pub frames: usize,
+    /// Lumen mesh triangles.
+    pub triangles: usize,
+    /// Atlas size in texels.
+    pub atlas_size: [u32; 2],
+    /// Texels on a chart.
+    pub chart_texels: usize,
+    /// Texels seen by at least one frame.
+    pub covered_texels: usize,
+    /// Atlas charts.
+    pub charts: usize,
+    /// Segmented airway volume (ml).
+    pub airway_volume_ml: f64,
+}
+
+/// shading.json.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ShadingFile {
+    /// "paper": one Psi per viewpoint (Chung et al. 2004, eq. 2–5).
+    pub model: String,
+    /// The fitted viewpoints, in frame order.
+    pub viewpoints: Vec<PsiModel>,
+}
