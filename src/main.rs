@@ -5,7 +5,10 @@ use bronchosim::inspect::{inspect_case, InspectOptions};
 use bronchosim::math::Point3;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::workflow::build::{build_model, BuildOptions};
+use bronchosim::render::{RenderOptions, ShadingMode};
 use bronchosim::workflow::demo::run_demo;
+use bronchosim::workflow::render::{render_command, RenderCommandOptions};
+use bronchosim::workflow::truth_eval::evaluate_with_baselines;
 use bronchosim::workflow::segment::{
     default_segment_out, parse_point, segment_command, SegmentCommandOptions,
 };
@@ -89,6 +92,10 @@ enum Command {
         /// weights) or "average" (predicted-intensity-weighted average).
         #[arg(long, default_value = "max")]
         fusion: String,
+        /// Reference views (views.json, camera.json, images; e.g. the phantom's truth/): the
+        /// report then scores new views against them next to two baselines.
+        #[arg(long)]
+        truth: Option<PathBuf>,
         /// Replace an existing model folder.
         #[arg(long)]
         force: bool,
@@ -133,6 +140,34 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+    /// Render new views of a built model (paper Fig. 4) from the poses of a views.json.
+    Render {
+        /// The model folder (from `build`).
+        model: PathBuf,
+        /// Poses of the new views, in the poses.json schema; each "image" names the output PNG
+        /// inside --out.
+        #[arg(long)]
+        views: PathBuf,
+        /// Camera of the new views (camera.json or OpenCV YAML/XML); default: the training camera.
+        #[arg(long)]
+        camera: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Shading of a new view: "nearest" (the paper: Psi of the nearest fitted viewpoint) or
+        /// "blend" (the k nearest viewpoints' Psi blended continuously).
+        #[arg(long, default_value = "blend")]
+        shading: String,
+        /// Viewpoints blended by --shading blend.
+        #[arg(long, default_value_t = 4)]
+        k: usize,
+        /// Rays per pixel along each axis (antialiasing).
+        #[arg(long, default_value_t = 1)]
+        supersample: u32,
+        /// Replace an existing output folder.
+        #[arg(long)]
+        force: bool,
+    },
     /// Score rendered views against reference images: PSNR and SSIM on the pixels both cover,
     /// after one least-squares gain per channel over all views.
     Evaluate {
@@ -142,10 +177,14 @@ enum Command {
         /// Truth folder: views.json, the reference images it names, optional `<stem>_mask.png`.
         #[arg(long)]
         truth: PathBuf,
-        /// Also score the baselines (nearest training frame reprojected; flat albedo with
-        /// cos(gamma)/z^2 shading) on the same pixels. Needs the model folder.
-        #[arg(long)]
-        baselines: bool,
+        /// Also render and score, from this model folder, the paper's method (nearest and
+        /// k-nearest Psi) and the two baselines ((a) nearest training frame reprojected,
+        /// (b) flat albedo with cos(gamma)/z^2 shading) on the same pixels.
+        #[arg(long, value_name = "MODEL")]
+        baselines: Option<PathBuf>,
+        /// The case the model was built from (default: the one model.json names).
+        #[arg(long, requires = "baselines")]
+        case: Option<PathBuf>,
         /// Print the scores as JSON.
         #[arg(long)]
         json: bool,
@@ -194,6 +233,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     m.mean_r2,
                     d.model.join("report.html").display()
                 );
+                println!(
+                    "truth views rendered into {}; scores (PSNR dB / SSIM, same pixels, per-channel gain):\n{}",
+                    d.views.display(),
+                    bronchosim::render::evaluate::scores_text(&d.scores)
+                );
             }
             Ok(())
         }
@@ -202,10 +246,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             out,
             texel_mm,
             fusion,
+            truth,
             force,
         } => {
             let mut opts = BuildOptions {
                 force,
+                truth,
                 quiet: cli.quiet,
                 ..Default::default()
             };
@@ -330,21 +376,57 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        Command::Render {
+            model,
+            views,
+            camera,
+            out,
+            shading,
+            k,
+            supersample,
+            force,
+        } => {
+            let shading = match shading.as_str() {
+                "nearest" => ShadingMode::Nearest,
+                "blend" => ShadingMode::KNearest { k: k.max(1) },
+                other => anyhow::bail!("--shading {other}: expected nearest or blend"),
+            };
+            let opts = RenderCommandOptions {
+                camera,
+                render: RenderOptions {
+                    shading,
+                    supersample: supersample.max(1),
+                    ..Default::default()
+                },
+                force,
+            };
+            let s = render_command(&model, &views, &out, &opts)
+                .with_context(|| format!("render {}", model.display()))?;
+            if !cli.quiet {
+                println!(
+                    "rendered {} views into {} in {:.2} s ({:.1} views/s; shading {}; model loaded in {:.2} s)",
+                    s.images.len(),
+                    out.display(),
+                    s.render_seconds,
+                    s.images.len() as f64 / s.render_seconds.max(1e-9),
+                    s.shading,
+                    s.load_seconds
+                );
+            }
+            Ok(())
+        }
         Command::Evaluate {
             rendered,
             truth,
             baselines,
+            case,
             json,
         } => {
-            if baselines {
-                // The baselines are library functions (render::baselines); producing their
-                // frames needs the model folder and the case, wired with `build`.
-                anyhow::bail!(
-                    "evaluate --baselines: not available yet (needs the model folder written by build)"
-                );
+            let scores = match &baselines {
+                Some(model) => evaluate_with_baselines(&rendered, &truth, model, case.as_deref()),
+                None => bronchosim::render::evaluate_folders(&rendered, &truth, Vec::new()),
             }
-            let scores = bronchosim::render::evaluate_folders(&rendered, &truth, Vec::new())
-                .with_context(|| format!("evaluate {}", rendered.display()))?;
+            .with_context(|| format!("evaluate {}", rendered.display()))?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&scores)?);
             } else {

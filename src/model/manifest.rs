@@ -86,8 +86,11 @@ pub struct ModelManifest {
 /// Input files of a model.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ModelInputs {
-    /// The case folder.
+    /// The case folder (absolute, as at build time).
     pub case: String,
+    /// The case folder relative to the model folder, when they share a parent folder: still
+    /// valid after both are moved together (e.g. the demo folder).
+    pub case_relative: Option<String>,
     /// The CT.
     pub ct: String,
     /// The camera file.
@@ -124,4 +127,60 @@ pub struct ShadingFile {
     pub model: String,
     /// The fitted viewpoints, in frame order.
     pub viewpoints: Vec<PsiModel>,
+}
+
+/// `to` relative to the folder `from` ("../case"), when both are absolute and share a first
+/// component below the root; `None` otherwise.
+pub fn relative_path(from: &std::path::Path, to: &std::path::Path) -> Option<String> {
+    use std::path::Component;
+    let a: Vec<Component> = from.components().collect();
+    let b: Vec<Component> = to.components().collect();
+    if !from.is_absolute() || !to.is_absolute() {
+        return None;
+    }
+    let common = a.iter().zip(&b).take_while(|(x, y)| x == y).count();
+    if common < 2 {
+        return None;
+    }
+    let mut parts: Vec<String> = vec!["..".into(); a.len() - common];
+    parts.extend(
+        b[common..]
+            .iter()
+            .map(|c| c.as_os_str().to_string_lossy().into_owned()),
+    );
+    Some(if parts.is_empty() {
+        ".".into()
+    } else {
+        parts.join("/")
+    })
+}
+
+impl ModelInputs {
+    /// The case folder of a model loaded from `model_dir`: the relative path when it still
+    /// leads to a folder, else the absolute one.
+    pub fn case_dir(&self, model_dir: &std::path::Path) -> std::path::PathBuf {
+        if let Some(r) = &self.case_relative {
+            let p = model_dir.join(r);
+            if p.is_dir() {
+                return p;
+            }
+        }
+        self.case.clone().into()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::relative_path;
+    use std::path::Path;
+
+    #[test]
+    fn relative_paths() {
+        let r = |a: &str, b: &str| relative_path(Path::new(a), Path::new(b));
+        assert_eq!(r("/tmp/demo/model", "/tmp/demo/case").as_deref(), Some("../case"));
+        assert_eq!(r("/tmp/m", "/tmp/m").as_deref(), Some("."));
+        assert_eq!(r("/a/b/c", "/a/x").as_deref(), Some("../../x"));
+        assert_eq!(r("/a/m", "/b/c"), None);
+        assert_eq!(r("rel/m", "/a/c"), None);
+    }
 }

@@ -12,7 +12,7 @@ use crate::io::output_dir::OutputDir;
 use crate::io::poses::PoseEntry;
 use crate::math::Affine;
 use crate::model::manifest::{
-    BuildTimings, FrameFit, ModelCounts, ModelInputs, ModelManifest, ShadingFile,
+    relative_path, BuildTimings, FrameFit, ModelCounts, ModelInputs, ModelManifest, ShadingFile,
     MODEL_FORMAT_VERSION,
 };
 use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
@@ -25,6 +25,8 @@ use crate::texture::delight::Observation;
 use crate::texture::fusion::{fuse, FrameStream, FusionOptions};
 use crate::texture::output::write_texture_outputs;
 use crate::texture::texels::TexelSet;
+use crate::model::Model;
+use crate::workflow::new_views_figure::{novel_figure, truth_figure};
 use crate::workflow::progress::Progress;
 use crate::workflow::report::{write_report, ReportFrame, ReportInputs};
 use crate::workflow::segment::{segment_and_mesh, SegmentCommandOptions};
@@ -46,6 +48,9 @@ pub struct BuildOptions {
     pub fit: FitOptions,
     /// De-lighting and fusion.
     pub fusion: FusionOptions,
+    /// Reference views (a folder with views.json, camera.json and the images, like the
+    /// phantom's truth/): the report then scores the new views against them (Fig. 4).
+    pub truth: Option<std::path::PathBuf>,
     /// Replace an existing model folder.
     pub force: bool,
     /// No progress bars.
@@ -259,6 +264,10 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         generator: format!("bronchosim {}", env!("CARGO_PKG_VERSION")),
         inputs: ModelInputs {
             case: case.dir.display().to_string(),
+            case_relative: std::path::absolute(&case.dir).ok().and_then(|c| {
+                let m = std::path::absolute(out_dir.target()).ok()?;
+                relative_path(&m, &c)
+            }),
             ct: case.ct_source.path().display().to_string(),
             camera: case.camera_path.display().to_string(),
             poses: case.poses_path.display().to_string(),
@@ -284,6 +293,17 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         atlas_mean_l2_stretch: atlas.stats.mean_l2_stretch,
         atlas_utilisation: atlas.stats.utilisation,
     };
+    // Fig. 4 is rendered from the model as written (airway.glb, shading.json, model.json).
+    write_json(&out_dir.join("model.json"), &manifest)?;
+    let model = Model::load(out_dir.path())?;
+    let figure = match &opts.truth {
+        Some(truth) => {
+            let fig = truth_figure(&model, &case, truth)?;
+            write_json(&out_dir.join("evaluation.json"), &fig.scores)?;
+            fig
+        }
+        None => novel_figure(&model, &case)?,
+    };
     write_report(
         &out_dir.join("report.html"),
         &ReportInputs {
@@ -291,6 +311,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
             frames: &report_frames,
             albedo_png: &std::fs::read(out_dir.join("albedo.png"))
                 .map_err(|e| Error::io(out_dir.join("albedo.png"), e))?,
+            new_views: Some(&figure),
         },
     )?;
     manifest.timings.write = t.elapsed().as_secs_f64();

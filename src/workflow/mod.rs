@@ -3,6 +3,9 @@
 
 pub mod build;
 pub mod demo;
+pub mod new_views_figure;
 pub mod progress;
+pub mod render;
 pub mod report;
 pub mod segment;
+pub mod truth_eval;
