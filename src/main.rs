@@ -4,7 +4,7 @@ use anyhow::Context;
 use bronchosim::inspect::{inspect_case, InspectOptions};
 use bronchosim::math::Point3;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
-use bronchosim::workflow::build::{build_model, BuildOptions};
+use bronchosim::workflow::build::{build_model, BuildOptions, ShadingChoice};
 use bronchosim::render::{RenderOptions, ShadingMode};
 use bronchosim::workflow::demo::run_demo;
 use bronchosim::workflow::render::{render_command, RenderCommandOptions};
@@ -92,6 +92,14 @@ enum Command {
         /// weights) or "average" (predicted-intensity-weighted average).
         #[arg(long, default_value = "max")]
         fusion: String,
+        /// Shading model of the texture and of new views: "paper" (per-viewpoint Psi),
+        /// "calibrated" (one light for the whole video) or "auto" (the one that predicts
+        /// held-out frames better).
+        #[arg(long, default_value = "auto")]
+        shading: String,
+        /// Hold out every N-th frame to cross-validate both shading models (0: skip).
+        #[arg(long, default_value_t = 5)]
+        cross_validate_every: usize,
         /// Reference views (views.json, camera.json, images; e.g. the phantom's truth/): the
         /// report then scores new views against them next to two baselines.
         #[arg(long)]
@@ -246,12 +254,21 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             out,
             texel_mm,
             fusion,
+            shading,
+            cross_validate_every,
             truth,
             force,
         } => {
             let mut opts = BuildOptions {
                 force,
                 truth,
+                cross_validate_every,
+                shading: match shading.as_str() {
+                    "auto" => ShadingChoice::Auto,
+                    "paper" => ShadingChoice::Paper,
+                    "calibrated" => ShadingChoice::Calibrated,
+                    other => anyhow::bail!("--shading {other}: expected auto, paper or calibrated"),
+                },
                 quiet: cli.quiet,
                 ..Default::default()
             };
@@ -267,7 +284,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .with_context(|| format!("build {}", case.display()))?;
             if !cli.quiet {
                 println!(
-                    "built {} from {} frames in {:.1} s: {} triangles, atlas {}x{} ({} of {} texels seen), mean R² of Psi {:.3}",
+                    "built {} from {} frames in {:.1} s: {} triangles, atlas {}x{} ({} of {} texels seen), mean R² of Psi {:.3}, shading {}",
                     out.display(),
                     m.counts.frames,
                     m.timings.total,
@@ -276,8 +293,24 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     m.counts.atlas_size[1],
                     m.counts.covered_texels,
                     m.counts.chart_texels,
-                    m.mean_r2
+                    m.mean_r2,
+                    m.shading_model
                 );
+                if let Some(cv) = &m.cross_validation {
+                    for mc in &cv.models {
+                        println!(
+                            "  held-out frames ({} of {}): {} predicts them at {:.2} dB PSNR, SSIM {:.4}",
+                            cv.held_out.len(),
+                            m.counts.frames,
+                            mc.model,
+                            mc.mean_psnr_db.unwrap_or(f64::NAN),
+                            mc.mean_ssim.unwrap_or(f64::NAN)
+                        );
+                    }
+                }
+                for w in &m.warnings {
+                    eprintln!("warning: {w}");
+                }
             }
             Ok(())
         }

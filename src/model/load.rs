@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use super::manifest::{ModelManifest, ShadingFile, MODEL_FORMAT_VERSION};
-use crate::io::frames::decode_png_bytes;
+use crate::io::frames::{decode_png_bytes, read_png};
 use crate::io::glb_import::read_glb;
 use crate::mesh::TriMesh;
 use crate::raycast::Scene;
@@ -26,6 +26,8 @@ pub struct Model {
     pub tri_uv: Vec<[[f32; 2]; 3]>,
     /// The relative albedo the shading multiplies (linear), with its mip chain.
     pub texture: MipTexture,
+    /// The paper's texture when the model's shading is calibrated (albedo_paper.png).
+    pub paper_texture: Option<MipTexture>,
     /// The mesh, ready for ray casting.
     pub scene: Scene,
     /// Centres and directions of the fitted viewpoints.
@@ -39,6 +41,29 @@ fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<
         _ => Error::io(path, e),
     })?;
     serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("{what}: {e}")))
+}
+
+/// A texture PNG (linear after decoding) divided back to the relative albedo the shading
+/// multiplies: `png / (albedo_scale · colour_balance)`, with its mip chain.
+fn relative_texture(
+    mut image: crate::io::frames::Frame,
+    scale: f32,
+    balance: [f32; 3],
+    texel_mm: f64,
+    manifest: &Path,
+) -> Result<MipTexture> {
+    if !(scale > 0.0 && balance.iter().all(|&k| k > 0.0 && k.is_finite())) {
+        return Err(Error::invalid(
+            manifest,
+            format!("albedo_scale {scale} and colour_balance {balance:?} must be positive"),
+        ));
+    }
+    for px in image.rgb.chunks_exact_mut(3) {
+        for ch in 0..3 {
+            px[ch] /= scale * balance[ch];
+        }
+    }
+    MipTexture::new(&image, None, texel_mm, &MipOptions::default())
 }
 
 impl Model {
@@ -71,6 +96,24 @@ impl Model {
         if shading.viewpoints.is_empty() {
             return Err(Error::invalid(&spath, "no fitted viewpoints"));
         }
+        match (shading.model.as_str(), &shading.calibrated) {
+            ("paper", _) => {}
+            ("calibrated", Some(c)) => c
+                .validate()
+                .map_err(|m| Error::invalid(&spath, format!("calibrated light: {m}")))?,
+            ("calibrated", None) => {
+                return Err(Error::invalid(
+                    &spath,
+                    "model \"calibrated\" but no \"calibrated\" light",
+                ))
+            }
+            (other, _) => {
+                return Err(Error::invalid(
+                    &spath,
+                    format!("unknown shading model {other:?} (expected paper or calibrated)"),
+                ))
+            }
+        }
         let gpath = dir.join("airway.glb");
         let glb = read_glb(&gpath)?;
         let uvs = glb
@@ -79,21 +122,37 @@ impl Model {
         let png = glb
             .texture_png
             .ok_or_else(|| Error::invalid(&gpath, "no embedded base colour texture"))?;
-        let mut image = decode_png_bytes(&png, &gpath)?;
-        let b = manifest.colour_balance;
-        let s = manifest.albedo_scale;
-        if !(s > 0.0 && b.iter().all(|&k| k > 0.0 && k.is_finite())) {
-            return Err(Error::invalid(
-                &mpath,
-                format!("albedo_scale {s} and colour_balance {b:?} must be positive"),
-            ));
-        }
-        for px in image.rgb.chunks_exact_mut(3) {
-            for ch in 0..3 {
-                px[ch] /= s * b[ch];
+        let image = decode_png_bytes(&png, &gpath)?;
+        let texture = relative_texture(
+            image,
+            manifest.albedo_scale,
+            manifest.colour_balance,
+            manifest.texel_mm,
+            &mpath,
+        )?;
+        let paper_texture = match &manifest.paper_texture {
+            Some(extra) => {
+                let p = dir.join(&extra.file);
+                let t = relative_texture(
+                    read_png(&p)?,
+                    extra.albedo_scale,
+                    extra.colour_balance,
+                    manifest.texel_mm,
+                    &mpath,
+                )?;
+                if (t.width, t.height) != (texture.width, texture.height) {
+                    return Err(Error::invalid(
+                        &p,
+                        format!(
+                            "{}x{} texels, airway.glb's texture {}x{}",
+                            t.width, t.height, texture.width, texture.height
+                        ),
+                    ));
+                }
+                Some(t)
             }
-        }
-        let texture = MipTexture::new(&image, None, manifest.texel_mm, &MipOptions::default())?;
+            None => None,
+        };
         let tri_uv = glb
             .mesh
             .triangles
@@ -110,9 +169,28 @@ impl Model {
             mesh,
             tri_uv,
             texture,
+            paper_texture,
             scene,
             index,
         })
+    }
+
+    /// The calibrated light when it is the model's shading.
+    pub fn calibrated(&self) -> Option<&crate::shading::CalibratedModel> {
+        match self.shading.model.as_str() {
+            "calibrated" => self.shading.calibrated.as_ref(),
+            _ => None,
+        }
+    }
+
+    /// The inputs of [`crate::render::render_view`] for the paper's method: Psi of the fitted
+    /// viewpoints and the paper's texture, also when the model's shading is calibrated.
+    pub fn paper_render_inputs(&self) -> RenderInputs<'_> {
+        RenderInputs {
+            calibrated: None,
+            texture: self.paper_texture.as_ref().unwrap_or(&self.texture),
+            ..self.render_inputs()
+        }
     }
 
     /// What [`crate::render::render_view`] needs.
@@ -123,6 +201,7 @@ impl Model {
             texture: &self.texture,
             psi: &self.shading.viewpoints,
             index: &self.index,
+            calibrated: self.calibrated(),
         }
     }
 }

@@ -5,6 +5,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::camera::Camera;
 use crate::shading::psi::PsiModel;
+use crate::shading::CalibratedModel;
+use crate::workflow::cross_validate::CrossValidation;
 
 /// Version of the model folder layout (model.json `format_version`).
 ///
@@ -40,6 +42,10 @@ pub struct BuildTimings {
     pub atlas: f64,
     /// Per-frame ray cast, samples and Psi fit (all frames).
     pub fit: f64,
+    /// The calibrated light fit on the pooled samples.
+    pub calibrated_fit: f64,
+    /// Cross-validation of both shading models (fusions without the held-out frames).
+    pub cross_validation: f64,
     /// De-lighting and fusion (all frames, both passes).
     pub fusion: f64,
     /// Writing the model folder and the report.
@@ -75,12 +81,34 @@ pub struct ModelManifest {
     pub colour_balance: [f32; 3],
     /// Texel edge length of the atlas on the surface (mm).
     pub texel_mm: f64,
-    /// The shading model new views use by default ("paper" or "calibrated").
+    /// The shading model the texture was de-lit with and new views use ("paper" or
+    /// "calibrated").
     pub shading_model: String,
+    /// The paper's texture (de-lit by each frame's Psi) when the model's shading is
+    /// calibrated: the reference the report compares against.
+    pub paper_texture: Option<ExtraTexture>,
+    /// Held-out frame prediction per shading model (absent when not run).
+    pub cross_validation: Option<CrossValidation>,
+    /// What the build could not do as asked (e.g. a failed calibrated fit).
+    pub warnings: Vec<String>,
     /// Mean L2 stretch of the atlas.
     pub atlas_mean_l2_stretch: f64,
     /// Atlas utilisation (covered / all texels).
     pub atlas_utilisation: f64,
+}
+
+/// File name of the paper's texture beside a calibrated model's albedo.png.
+pub const PAPER_TEXTURE_FILE: &str = "albedo_paper.png";
+
+/// A second texture atlas of the model folder (same atlas layout as albedo.png).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ExtraTexture {
+    /// File name inside the model folder.
+    pub file: String,
+    /// As [`ModelManifest::albedo_scale`], for this file.
+    pub albedo_scale: f32,
+    /// As [`ModelManifest::colour_balance`], for this file.
+    pub colour_balance: [f32; 3],
 }
 
 /// Input files of a model.
@@ -120,13 +148,17 @@ pub struct ModelCounts {
     pub airway_volume_ml: f64,
 }
 
-/// shading.json.
+/// shading.json: both shading models; `model` names the one the texture was de-lit with and
+/// new views use.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ShadingFile {
-    /// "paper": one Psi per viewpoint (Chung et al. 2004, eq. 2–5).
+    /// "paper" (one Psi per viewpoint, Chung et al. 2004, eq. 2–5) or "calibrated".
     pub model: String,
-    /// The fitted viewpoints, in frame order.
+    /// The paper's fitted viewpoints, in frame order (always fitted: the reference).
     pub viewpoints: Vec<PsiModel>,
+    /// The calibrated light of the whole video (gains in frame order), when fitted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibrated: Option<CalibratedModel>,
 }
 
 /// `to` relative to the folder `from` ("../case"), when both are absolute and share a first

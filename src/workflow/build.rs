@@ -5,27 +5,33 @@
 //! de-light and fuse (two streaming passes over the frames) → model folder.
 
 use crate::io::case::Case;
-use crate::io::frame_source::FrameSource;
 use crate::io::frames::Frame;
 use crate::io::nifti::write_nifti;
 use crate::io::output_dir::OutputDir;
-use crate::io::poses::PoseEntry;
 use crate::math::Affine;
 use crate::model::manifest::{
-    relative_path, BuildTimings, FrameFit, ModelCounts, ModelInputs, ModelManifest, ShadingFile,
+    relative_path, BuildTimings, ExtraTexture, PAPER_TEXTURE_FILE, FrameFit, ModelCounts, ModelInputs, ModelManifest, ShadingFile,
     MODEL_FORMAT_VERSION,
 };
 use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
+use crate::render::triangle_uvs;
+use crate::shading::calibrated_fit::{fit_calibrated, CalibratedOptions};
+use crate::shading::calibrated_predict::cos_theta_of;
+use crate::shading::calibrated_samples::{
+    density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples,
+};
 use crate::shading::fit::{fit_psi, FitOptions};
 use crate::shading::psi::PsiModel;
 use crate::shading::samples::{extract_samples, SampleOptions, SampleSet};
 use crate::shading::weights::{density_weights, WeightOptions};
 use crate::texture::atlas::{build_atlas, rasterize_texels, AtlasOptions};
-use crate::texture::delight::Observation;
-use crate::texture::fusion::{fuse, FrameStream, FusionOptions};
-use crate::texture::output::write_texture_outputs;
+use crate::texture::fusion::{fuse, FusionOptions};
+use crate::io::atomic::write_bytes_atomic;
+use crate::texture::output::{encode_albedo, write_texture_outputs};
 use crate::texture::texels::TexelSet;
 use crate::model::Model;
+use crate::workflow::build_frames::{CaseFrames, DepthCache, FrameShadingSource};
+use crate::workflow::cross_validate::{cross_validate, CrossValidationInputs};
 use crate::workflow::new_views_figure::{novel_figure, truth_figure};
 use crate::workflow::progress::Progress;
 use crate::workflow::report::{write_report, ReportFrame, ReportInputs};
@@ -35,8 +41,20 @@ use serde::Serialize;
 use std::path::Path;
 use std::time::Instant;
 
+/// Which shading model a build uses for its texture and new views.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ShadingChoice {
+    /// The model that predicts held-out frames better (cross-validation decides).
+    #[default]
+    Auto,
+    /// The paper's per-viewpoint Psi.
+    Paper,
+    /// One calibrated light for the whole video.
+    Calibrated,
+}
+
 /// Options of the whole build; every stage's options with their defaults.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct BuildOptions {
     /// Segmentation and lumen mesh.
     pub segment: SegmentCommandOptions,
@@ -48,6 +66,18 @@ pub struct BuildOptions {
     pub fit: FitOptions,
     /// De-lighting and fusion.
     pub fusion: FusionOptions,
+    /// Which shading model de-lights the texture and shades new views.
+    pub shading: ShadingChoice,
+    /// The calibrated light fit.
+    pub calibrated: CalibratedOptions,
+    /// Pooling of the calibrated fit's samples.
+    pub pool: PoolOptions,
+    /// Hold out every k-th frame for the cross-validation (0: no cross-validation).
+    pub cross_validate_every: usize,
+    /// Most frames held out.
+    pub cross_validate_max_frames: usize,
+    /// Memory for depth buffers kept between passes (bytes); beyond it frames are ray cast again.
+    pub depth_cache_bytes: usize,
     /// Reference views (a folder with views.json, camera.json and the images, like the
     /// phantom's truth/): the report then scores the new views against them (Fig. 4).
     pub truth: Option<std::path::PathBuf>,
@@ -55,6 +85,27 @@ pub struct BuildOptions {
     pub force: bool,
     /// No progress bars.
     pub quiet: bool,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        BuildOptions {
+            segment: SegmentCommandOptions::default(),
+            atlas: AtlasOptions::default(),
+            samples: SampleOptions::default(),
+            fit: FitOptions::default(),
+            fusion: FusionOptions::default(),
+            shading: ShadingChoice::default(),
+            calibrated: CalibratedOptions::default(),
+            pool: PoolOptions::default(),
+            cross_validate_every: 5,
+            cross_validate_max_frames: 24,
+            depth_cache_bytes: 1 << 30,
+            truth: None,
+            force: false,
+            quiet: false,
+        }
+    }
 }
 
 /// The pixels of a frame that obey the model, and the fitted Psi.
@@ -120,58 +171,12 @@ fn row_major(m: &Affine) -> [f64; 16] {
     a
 }
 
-/// The frames of a case for the fusion passes: decoded again for each pass (never all in
-/// memory), each with its G-buffer depth and fitted Psi.
-struct CaseFrames<'a> {
-    case: &'a Case,
-    scene: &'a Scene,
-    rays: &'a RayTable,
-    psi: &'a [PsiModel],
-    source: Option<FrameSource>,
-    next: usize,
-    frame: Frame,
-    depth: Vec<f32>,
-    progress: Progress,
-}
-
-impl FrameStream for CaseFrames<'_> {
-    fn frame_count(&self) -> usize {
-        self.psi.len()
-    }
-
-    fn observation(&mut self, index: usize) -> Result<Observation<'_>> {
-        if self.source.is_none() || index < self.next {
-            self.source = Some(self.case.frame_source()?);
-            self.next = 0;
-        }
-        let src = self.source.as_mut().expect("opened above");
-        while self.next <= index {
-            let f = src.next().ok_or_else(|| {
-                Error::Other(format!("frame {index} missing from the frame source"))
-            })??;
-            if self.next == index {
-                self.frame = f;
-            }
-            self.next += 1;
-        }
-        let pose: &PoseEntry = &self.case.poses[index];
-        self.depth = cast_frame_with(self.scene, self.rays, &pose.camera_to_world).z;
-        self.progress.inc();
-        Ok(Observation {
-            frame: &self.frame,
-            camera: &self.case.camera,
-            camera_to_world: &self.case.poses[index].camera_to_world,
-            psi: &self.psi[index],
-            depth: &self.depth,
-        })
-    }
-}
-
 /// Build the model of the case in `case_dir` into `out` (atomically).
 pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<ModelManifest> {
     let t_all = Instant::now();
     let out_dir = OutputDir::create(out, opts.force)?;
     let mut timings = BuildTimings::default();
+    let mut warnings: Vec<String> = Vec::new();
 
     let t = Instant::now();
     let case = Case::open(case_dir)?;
@@ -201,9 +206,13 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     let mut report_frames = Vec::new();
     let report_every = (n / 3).max(1);
     let progress = Progress::new("fit Psi", n as u64, opts.quiet);
-    // Mean colour of the pixels that obey the model: Psi is fitted per channel, so the de-lit
-    // texture has each channel's mean divided out; this puts the colour back (one scale per channel).
+    // Mean colour of the pixels that obey the model: the shading is fitted per channel, so the
+    // de-lit texture has each channel's mean divided out; this puts the colour back (one scale
+    // per channel).
     let mut pixel_sum = [0f64; 3];
+    let cos_theta = cos_theta_of(&rays);
+    let mut pooled = PooledSamples::default();
+    let mut cache = DepthCache::new(n, opts.depth_cache_bytes);
     for (i, frame) in case.frame_source()?.enumerate() {
         let frame = frame?;
         let pose = &case.poses[i].camera_to_world;
@@ -214,6 +223,17 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         for (ch, sum) in pixel_sum.iter_mut().enumerate() {
             *sum += samples.rgb[ch].iter().map(|&v| v as f64).sum::<f64>();
         }
+        if opts.shading != ShadingChoice::Paper || opts.cross_validate_every > 0 {
+            let data = FrameData {
+                gamma: &g.gamma,
+                z: &g.z,
+                cos_theta: &cos_theta,
+                rgb: &frame.rgb,
+                texel: None,
+            };
+            pooled.append(pool_frames(&[data], &opts.pool)?)?;
+        }
+        cache.offer(i, &g.z);
         if i % report_every == 0 && report_frames.len() < 3 {
             report_frames.push(ReportFrame {
                 index: i,
@@ -230,32 +250,125 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     progress.finish();
     timings.fit = t.elapsed().as_secs_f64();
 
-    // Pass 2 (and 3 for the max-weight method): de-light and fuse, streaming the frames.
+    // The calibrated light of the whole video, on the pooled samples.
+    let t = Instant::now();
+    let calibrated = if pooled.is_empty() {
+        None
+    } else {
+        let density = density_weights_3d(&pooled, &WeightOptions::default());
+        match fit_calibrated(&pooled, &density, &opts.calibrated) {
+            Ok(fit) => Some(fit.model),
+            Err(e) if opts.shading == ShadingChoice::Calibrated => {
+                return Err(Error::Other(format!("calibrated light fit: {e}")))
+            }
+            Err(e) => {
+                warnings.push(format!("calibrated light fit failed ({e}); using the paper's Psi"));
+                None
+            }
+        }
+    };
+    timings.calibrated_fit = t.elapsed().as_secs_f64();
+    drop(pooled);
+
+    let tri_uv = triangle_uvs(&atlas);
+    let t = Instant::now();
+    let cross_validation = if opts.cross_validate_every > 0 {
+        let inputs = CrossValidationInputs {
+            case: &case,
+            scene: &scene,
+            rays: &rays,
+            texels: &texels,
+            tri_uv: &tri_uv,
+            atlas_size: [atlas.width, atlas.height],
+            texel_mm: opts.atlas.texel_mm,
+            psi: &psi,
+            calibrated: calibrated.as_ref(),
+            cache: &cache,
+            fusion: &opts.fusion,
+            samples: &opts.samples,
+            quiet: opts.quiet,
+        };
+        match cross_validate(
+            &inputs,
+            opts.cross_validate_every,
+            opts.cross_validate_max_frames,
+        ) {
+            Ok(cv) => Some(cv),
+            Err(e) => {
+                warnings.push(format!("cross-validation skipped: {e}"));
+                None
+            }
+        }
+    } else {
+        None
+    };
+    timings.cross_validation = t.elapsed().as_secs_f64();
+    let shading_model = match (opts.shading, &calibrated) {
+        (ShadingChoice::Paper, _) | (_, None) => "paper",
+        (ShadingChoice::Calibrated, Some(_)) => "calibrated",
+        (ShadingChoice::Auto, Some(_)) => cross_validation
+            .as_ref()
+            .map_or("calibrated", |cv| cv.winner()),
+    }
+    .to_string();
+
+    // De-light and fuse all frames with the chosen model (two streaming passes for max-weight).
     let t = Instant::now();
     let passes = 2;
-    let mut stream = CaseFrames {
-        case: &case,
-        scene: &scene,
-        rays: &rays,
-        psi: &psi,
-        source: None,
-        next: 0,
-        frame: Frame::new(1, 1),
-        depth: Vec::new(),
-        progress: Progress::new("de-light + fuse", (passes * n) as u64, opts.quiet),
+    let source = match (shading_model.as_str(), &calibrated) {
+        ("calibrated", Some(c)) => FrameShadingSource::Calibrated(c),
+        _ => FrameShadingSource::Paper(&psi),
     };
+    let mut stream = CaseFrames::new(
+        &case,
+        &scene,
+        &rays,
+        source,
+        &cache,
+        (0..n).collect(),
+        Progress::new("de-light + fuse", (passes * n) as u64, opts.quiet),
+    );
     let fused = fuse(&texels, &mut stream, &opts.fusion)?;
     stream.progress.finish();
+    drop(stream);
     let mut filled = fused.filled(&texels)?;
-    let colour_balance = colour_balance(&mut filled, &fused.covered, pixel_sum);
+    let balance = colour_balance(&mut filled, &fused.covered, pixel_sum);
+    // With the calibrated light chosen, the paper's own texture (de-lit by each frame's Psi) is
+    // kept beside it: the paper's method stays the reference new views are compared against.
+    let paper_texture = if shading_model == "calibrated" {
+        let mut stream = CaseFrames::new(
+            &case,
+            &scene,
+            &rays,
+            FrameShadingSource::Paper(&psi),
+            &cache,
+            (0..n).collect(),
+            Progress::new("de-light + fuse (paper)", (passes * n) as u64, opts.quiet),
+        );
+        let fused = fuse(&texels, &mut stream, &opts.fusion)?;
+        stream.progress.finish();
+        drop(stream);
+        let mut rgb = fused.filled(&texels)?;
+        let paper_balance = colour_balance(&mut rgb, &fused.covered, pixel_sum);
+        let img = encode_albedo(&rgb, atlas.width, atlas.height, &fused.covered)?;
+        write_bytes_atomic(&out_dir.join(PAPER_TEXTURE_FILE), &img.png)?;
+        Some(ExtraTexture {
+            file: PAPER_TEXTURE_FILE.into(),
+            albedo_scale: img.scale,
+            colour_balance: paper_balance,
+        })
+    } else {
+        None
+    };
     timings.fusion = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
     let tex = write_texture_outputs(out_dir.path(), &atlas, &filled, &fused.covered)?;
     write_nifti(&out_dir.join("segmentation.nii.gz"), &seg.mask)?;
     let shading = ShadingFile {
-        model: "paper".into(),
+        model: shading_model.clone(),
         viewpoints: psi,
+        calibrated,
     };
     write_json(&out_dir.join("shading.json"), &shading)?;
     let mean_r2 = fits.iter().flat_map(|f| f.r2).sum::<f64>() / (3 * fits.len().max(1)) as f64;
@@ -287,9 +400,12 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         mean_r2,
         camera: case.camera,
         albedo_scale: tex.albedo_scale,
-        colour_balance,
+        colour_balance: balance,
         texel_mm: opts.atlas.texel_mm,
-        shading_model: "paper".into(),
+        shading_model,
+        paper_texture,
+        cross_validation,
+        warnings,
         atlas_mean_l2_stretch: atlas.stats.mean_l2_stretch,
         atlas_utilisation: atlas.stats.utilisation,
     };

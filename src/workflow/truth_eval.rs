@@ -1,6 +1,7 @@
 //! Scoring a model's new views against reference views (the phantom's `truth/`), next to the
 //! two baselines of issue 7, on the same pixels with the same per-channel gain fit:
-//! the paper (nearest viewpoint's Psi), the paper with k-nearest blending, (a) the nearest
+//! the calibrated light (when it is the model's shading), the paper (nearest viewpoint's Psi,
+//! with the paper's texture), the paper with k-nearest blending, (a) the nearest
 //! training frame projected onto the geometry without de-lighting, (b) a flat albedo under
 //! `cos(gamma) / z²`. Used by `bronchosim evaluate --baselines` and by `build --truth`
 //! (report Fig. 4).
@@ -16,11 +17,14 @@ use crate::model::Model;
 use crate::render::views_io::load_truth;
 use crate::render::{
     evaluate_methods, flat_albedo_view, render_view_with, reproject_nearest_frame, MaskedImage,
-    MethodScore, RenderOptions, ShadingMode, TrainingView, ViewRays, ViewpointIndex,
+    MethodScore, RenderInputs, RenderOptions, ShadingMode, TrainingView, ViewRays, ViewpointIndex,
 };
 use crate::{Error, Result};
 
-/// Method names as they appear in tables and the report.
+/// Method names as they appear in tables and the report. The calibrated light (when it is the
+/// model's shading).
+pub const CALIBRATED: &str = "calibrated light";
+/// The paper: nearest viewpoint's Psi.
 pub const PAPER_NEAREST: &str = "paper (nearest Psi)";
 /// The paper's texture with the Psi of the k nearest viewpoints blended.
 pub const PAPER_BLENDED: &str = "paper, k-nearest Psi";
@@ -89,9 +93,8 @@ pub fn evaluate_against_truth(
     let (views, truth) = load_truth(truth_dir)?;
     let camera = truth_camera(truth_dir)?;
     let names: Vec<String> = views.iter().map(|v| v.name.clone()).collect();
-    let inputs = model.render_inputs();
     let rays = ViewRays::new(&camera, 1)?;
-    let render = |mode: ShadingMode| -> Result<Vec<MaskedImage>> {
+    let render = |inputs: &RenderInputs, mode: ShadingMode| -> Result<Vec<MaskedImage>> {
         let opts = RenderOptions {
             shading: mode,
             ..Default::default()
@@ -99,13 +102,18 @@ pub fn evaluate_against_truth(
         views
             .iter()
             .map(|v| {
-                let (frame, mask) = render_view_with(&inputs, &rays, &v.camera_to_world, &opts)?;
+                let (frame, mask) = render_view_with(inputs, &rays, &v.camera_to_world, &opts)?;
                 Ok(MaskedImage { frame, mask })
             })
             .collect()
     };
-    let nearest = render(ShadingMode::Nearest)?;
-    let blended = render(ShadingMode::default())?;
+    let paper = model.paper_render_inputs();
+    let nearest = render(&paper, ShadingMode::Nearest)?;
+    let blended = render(&paper, ShadingMode::default())?;
+    let calibrated = match model.calibrated() {
+        Some(_) => Some(render(&model.render_inputs(), ShadingMode::default())?),
+        None => None,
+    };
 
     let poses: Vec<_> = case.poses.iter().map(|p| p.camera_to_world).collect();
     let index = ViewpointIndex::from_poses(&poses);
@@ -147,6 +155,9 @@ pub fn evaluate_against_truth(
     let mut methods = Vec::new();
     if let Some(r) = rendered {
         methods.push(r);
+    }
+    if let Some(c) = calibrated {
+        methods.push((CALIBRATED.to_string(), c));
     }
     methods.push((PAPER_NEAREST.to_string(), nearest));
     methods.push((PAPER_BLENDED.to_string(), blended));
