@@ -4,14 +4,14 @@ use anyhow::Context;
 use bronchosim::inspect::{inspect_case, InspectOptions};
 use bronchosim::math::Point3;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
-use bronchosim::workflow::build::{build_model, BuildOptions, ShadingChoice};
 use bronchosim::render::{RenderOptions, ShadingMode};
+use bronchosim::workflow::build::{build_model, BuildOptions, ShadingChoice};
 use bronchosim::workflow::demo::run_demo;
 use bronchosim::workflow::render::{render_command, RenderCommandOptions};
-use bronchosim::workflow::truth_eval::evaluate_with_baselines;
 use bronchosim::workflow::segment::{
     default_segment_out, parse_point, segment_command, SegmentCommandOptions,
 };
+use bronchosim::workflow::truth_eval::evaluate_with_baselines;
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;

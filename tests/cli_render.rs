@@ -90,16 +90,26 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
     ok(&o);
     let scores: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let rendered = mean_psnr(&scores, "rendered");
+    let calibrated = mean_psnr(&scores, "calibrated light");
     let nearest = mean_psnr(&scores, "paper (nearest");
     let blended = mean_psnr(&scores, "paper, k-nearest");
     let reprojected = mean_psnr(&scores, "(a)");
     let flat = mean_psnr(&scores, "(b)");
     println!(
-        "mean PSNR (dB): rendered {rendered:.2}, paper nearest {nearest:.2}, paper k-nearest \
-         {blended:.2}, (a) reprojected {reprojected:.2}, (b) flat {flat:.2}"
+        "mean PSNR (dB): rendered {rendered:.2}, calibrated {calibrated:.2}, paper nearest \
+         {nearest:.2}, paper k-nearest {blended:.2}, (a) reprojected {reprojected:.2}, (b) flat \
+         {flat:.2}"
     );
-    // The render command writes what the in-memory renderer makes (8-bit PNG round trip only).
-    assert!((rendered - blended).abs() < 0.1, "{rendered} vs {blended}");
+    // The render command writes what the in-memory renderer makes with the model's shading
+    // (the calibrated light, chosen by cross-validation; 8-bit PNG round trip only).
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("model/model.json")).unwrap())
+            .unwrap();
+    assert_eq!(m["shading_model"], "calibrated");
+    assert!(
+        (rendered - calibrated).abs() < 0.1,
+        "{rendered} vs {calibrated}"
+    );
     // The report's table is the same evaluation.
     assert!((mean_psnr(&built, "paper, k-nearest") - blended).abs() < 1e-6);
     // Issue 7: the paper's method beats projecting the nearest frame without de-lighting.
@@ -107,6 +117,35 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
     assert!(nearest > reprojected, "{nearest} <= {reprojected}");
     // Not a tautology: the views are recognisably the airway.
     assert!(blended > 16.0, "{blended}");
+    // Issue 8: the calibrated light beats the paper's Psi by at least 3 dB and both baselines.
+    assert!(
+        calibrated >= nearest + 3.0,
+        "{calibrated} vs paper {nearest}"
+    );
+    assert!(
+        calibrated >= blended + 3.0,
+        "{calibrated} vs paper k-nearest {blended}"
+    );
+    assert!(calibrated > reprojected && calibrated > flat);
+    // Cross-validation ran for both models and its winner is the model's shading.
+    let cv = &m["cross_validation"];
+    let cv_psnr = |name: &str| {
+        cv["models"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["model"] == name)
+            .unwrap()["mean_psnr_db"]
+            .as_f64()
+            .unwrap()
+    };
+    let (cv_paper, cv_cal) = (cv_psnr("paper"), cv_psnr("calibrated"));
+    println!("held-out frames: paper {cv_paper:.2} dB, calibrated {cv_cal:.2} dB");
+    assert!(
+        cv_cal > cv_paper && cv_paper > 15.0,
+        "{cv_cal} vs {cv_paper}"
+    );
+    assert!(dir.join("model/albedo_paper.png").is_file());
 
     // An existing output folder is kept without --force; with it, replaced.
     let again = run(
@@ -127,7 +166,14 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
 
     // A model folder that is not one fails naming the file.
     let bad = run(
-        &["render", "case", "--views", "case/truth/views.json", "--out", "x"],
+        &[
+            "render",
+            "case",
+            "--views",
+            "case/truth/views.json",
+            "--out",
+            "x",
+        ],
         dir,
     );
     assert!(!bad.status.success());

@@ -209,7 +209,10 @@ mod tests {
     #[test]
     fn relative_paths() {
         let r = |a: &str, b: &str| relative_path(Path::new(a), Path::new(b));
-        assert_eq!(r("/tmp/demo/model", "/tmp/demo/case").as_deref(), Some("../case"));
+        assert_eq!(
+            r("/tmp/demo/model", "/tmp/demo/case").as_deref(),
+            Some("../case")
+        );
         assert_eq!(r("/tmp/m", "/tmp/m").as_deref(), Some("."));
         assert_eq!(r("/a/b/c", "/a/x").as_deref(), Some("../../x"));
         assert_eq!(r("/a/m", "/b/c"), None);

@@ -65,14 +65,13 @@ impl FrameShading<'_> {
     pub fn validate(&self) -> Result<(), String> {
         match self {
             FrameShading::Paper(p) => {
-                let finite = p
-                    .c
-                    .iter()
-                    .flatten()
-                    .chain(p.d.iter().flatten())
-                    .all(|x| x.is_finite())
-                    && p.z_min.is_finite()
-                    && p.z_max.is_finite();
+                let finite =
+                    p.c.iter()
+                        .flatten()
+                        .chain(p.d.iter().flatten())
+                        .all(|x| x.is_finite())
+                        && p.z_min.is_finite()
+                        && p.z_max.is_finite();
                 if finite {
                     Ok(())
                 } else {

@@ -34,8 +34,8 @@ pub use calibrated_refine::{refine_with_texels, RefineRound, RefinedFit};
 pub use calibrated_samples::{
     density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples,
 };
-pub use frame_shading::{FrameShading, Shade};
 pub use fit::{fit_psi, ChannelFit, FitOptions, PsiFit, Robust};
+pub use frame_shading::{FrameShading, Shade};
 pub use psi::PsiModel;
 pub use samples::{extract_samples, ExclusionCounts, SampleOptions, SampleSet};
 pub use weights::{density_weights, DensityWeights, WeightOptions};

@@ -216,7 +216,9 @@ impl<'a> FrameCtx<'a> {
             .depth
             .iter()
             .filter(|z| z.is_finite() && **z > 0.0)
-            .fold((f32::INFINITY, 0.0f32), |(lo, hi), &z| (lo.min(z), hi.max(z)));
+            .fold((f32::INFINITY, 0.0f32), |(lo, hi), &z| {
+                (lo.min(z), hi.max(z))
+            });
         let depth_max = depth_max as f64;
         let min_gamma = (opts.min_gamma as f64).clamp(1e-3, 1.0);
         let min_weight = opts.min_relative_weight.max(0.0)

@@ -4,15 +4,17 @@
 //! inspect → segment → lumen mesh → atlas → per frame (ray cast, samples, Psi fit) →
 //! de-light and fuse (two streaming passes over the frames) → model folder.
 
+use crate::io::atomic::write_bytes_atomic;
 use crate::io::case::Case;
 use crate::io::frames::Frame;
 use crate::io::nifti::write_nifti;
 use crate::io::output_dir::OutputDir;
 use crate::math::Affine;
 use crate::model::manifest::{
-    relative_path, BuildTimings, ExtraTexture, PAPER_TEXTURE_FILE, FrameFit, ModelCounts, ModelInputs, ModelManifest, ShadingFile,
-    MODEL_FORMAT_VERSION,
+    relative_path, BuildTimings, ExtraTexture, FrameFit, ModelCounts, ModelInputs, ModelManifest,
+    ShadingFile, MODEL_FORMAT_VERSION, PAPER_TEXTURE_FILE,
 };
+use crate::model::Model;
 use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
 use crate::render::triangle_uvs;
 use crate::shading::calibrated_fit::{fit_calibrated, CalibratedOptions};
@@ -26,10 +28,8 @@ use crate::shading::samples::{extract_samples, SampleOptions, SampleSet};
 use crate::shading::weights::{density_weights, WeightOptions};
 use crate::texture::atlas::{build_atlas, rasterize_texels, AtlasOptions};
 use crate::texture::fusion::{fuse, FusionOptions};
-use crate::io::atomic::write_bytes_atomic;
 use crate::texture::output::{encode_albedo, write_texture_outputs};
 use crate::texture::texels::TexelSet;
-use crate::model::Model;
 use crate::workflow::build_frames::{CaseFrames, DepthCache, FrameShadingSource};
 use crate::workflow::cross_validate::{cross_validate, CrossValidationInputs};
 use crate::workflow::new_views_figure::{novel_figure, truth_figure};
@@ -262,7 +262,9 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
                 return Err(Error::Other(format!("calibrated light fit: {e}")))
             }
             Err(e) => {
-                warnings.push(format!("calibrated light fit failed ({e}); using the paper's Psi"));
+                warnings.push(format!(
+                    "calibrated light fit failed ({e}); using the paper's Psi"
+                ));
                 None
             }
         }

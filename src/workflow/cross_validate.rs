@@ -197,7 +197,13 @@ pub fn cross_validate(
             };
             let label = format!("frame {i}");
             let s = evaluate_methods(
-                &[(name.to_string(), vec![MaskedImage { frame: pred, mask: hit }])],
+                &[(
+                    name.to_string(),
+                    vec![MaskedImage {
+                        frame: pred,
+                        mask: hit,
+                    }],
+                )],
                 &[truth],
                 std::slice::from_ref(&label),
             )?;

@@ -6,8 +6,8 @@
 use crate::io::output_dir::OutputDir;
 use crate::model::ModelManifest;
 use crate::phantom::{write_phantom_case, PhantomOptions};
-use crate::workflow::build::{build_model, BuildOptions};
 use crate::render::MethodScore;
+use crate::workflow::build::{build_model, BuildOptions};
 use crate::workflow::render::{render_command, RenderCommandOptions};
 use crate::workflow::truth_eval::evaluate_with_baselines;
 use crate::Result;

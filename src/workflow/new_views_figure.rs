@@ -112,7 +112,10 @@ pub fn novel_figure(model: &Model, case: &Case) -> Result<NewViewsFigure> {
     }
     let mut rows = Vec::new();
     for &i in &wanted {
-        let (a, b) = (&case.poses[i].camera_to_world, &case.poses[i + 1].camera_to_world);
+        let (a, b) = (
+            &case.poses[i].camera_to_world,
+            &case.poses[i + 1].camera_to_world,
+        );
         let pose = between_and_turned(a, b, 12f64.to_radians());
         let (view, _) = render_view_with(&inputs, &rays, &pose, &RenderOptions::default())?;
         let Some(frame) = frames.remove(&i) else {

@@ -5,11 +5,11 @@
 
 use crate::io::frames::{write_png_srgb8, Frame};
 use crate::model::ModelManifest;
-use crate::workflow::new_views_figure::NewViewsFigure;
 use crate::raycast::GBuffer;
 use crate::shading::plots::{plot_psi_slices, plot_samples_density};
 use crate::shading::psi::PsiModel;
 use crate::shading::samples::SampleSet;
+use crate::workflow::new_views_figure::NewViewsFigure;
 use crate::{Error, Result};
 use base64::Engine;
 use std::fmt::Write as _;
@@ -144,7 +144,11 @@ fn svg_series(title: &str, series: &[(&str, &str, Vec<f64>)], y_range: (f64, f64
 
 /// Fig. 4: rows of images and, with references, the score table.
 fn new_views_section(html: &mut String, fig: &NewViewsFigure, tmp: &Path) -> Result<()> {
-    let _ = write!(html, "<h2>New views (paper Fig. 4)</h2><p>{}</p>", fig.caption);
+    let _ = write!(
+        html,
+        "<h2>New views (paper Fig. 4)</h2><p>{}</p>",
+        fig.caption
+    );
     if !fig.scores.is_empty() {
         html.push_str("<table><tr><th>method</th><th>mean PSNR (dB)</th><th>mean SSIM</th></tr>");
         for s in &fig.scores {
