@@ -3,6 +3,7 @@
 
 pub mod build;
 pub mod demo;
+pub mod flythrough;
 pub mod progress;
 pub mod report;
 pub mod segment;
