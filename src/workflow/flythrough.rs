@@ -316,3 +316,115 @@ fn encode_video(dir: &Path, fps: u32) -> std::result::Result<&'static str, Strin
         "ffmpeg could not encode the video ({last_error}): frames only"
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A bent tube of radius 4 mm on a 0.5 mm grid: along +z from (10, 10, 2) to (10, 10, 25),
+    /// then along +x to (38, 10, 25).
+    fn bent_tube() -> Volume<u8> {
+        let dims = [84, 40, 64];
+        let mut a = Affine::identity();
+        for k in 0..3 {
+            a[(k, k)] = 0.5;
+        }
+        let mut m = Volume::filled(dims, a, 0u8);
+        let seg = |p: Point3<f64>, a: Point3<f64>, b: Point3<f64>| {
+            let ab = b - a;
+            let t = ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0);
+            (p - (a + ab * t)).norm()
+        };
+        let (p0, p1, p2) = (
+            Point3::new(10.0, 10.0, 2.0),
+            Point3::new(10.0, 10.0, 25.0),
+            Point3::new(38.0, 10.0, 25.0),
+        );
+        for z in 0..dims[2] {
+            for y in 0..dims[1] {
+                for x in 0..dims[0] {
+                    let p = m.index_to_world(Point3::new(x as f64, y as f64, z as f64));
+                    if seg(p, p0, p1).min(seg(p, p1, p2)) <= 4.0 {
+                        m.set(x, y, z, 1);
+                    }
+                }
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn poses_follow_the_centre_of_a_bent_tube_evenly() {
+        let m = bent_tube();
+        let opts = FlythroughOptions {
+            frames: 20,
+            ..Default::default()
+        };
+        // Start 1.5 mm off-centre, end on the axis.
+        let first = Point3::new(11.5, 10.0, 4.0);
+        let last = Point3::new(36.0, 10.0, 25.0);
+        let down0 = Vector3::new(0.0, -1.0, 0.0);
+        let (poses, len, clear) =
+            flythrough_poses(&m, Path::new("seg.nii.gz"), first, last, down0, &opts).unwrap();
+        assert_eq!(poses.len(), 20);
+        // Roughly 21 mm down the first leg and 26 mm along the second, less the cut corner.
+        assert!(len > 38.0 && len < 49.0, "length {len}");
+        assert!(clear > 2.0, "clearance {clear}");
+        let c: Vec<Point3<f64>> = poses.iter().map(camera_centre).collect();
+        // The resampled path ends within one step (0.5 mm) of the last camera.
+        let (d0, d1) = ((c[0] - first).norm(), (c[19] - last).norm());
+        assert!(d0 < 1e-6 && d1 < 0.5, "ends {d0} mm, {d1} mm off");
+        let steps: Vec<f64> = c.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
+        let (lo, hi) = steps
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(a, b), &s| (a.min(s), b.max(s)));
+        assert!(hi / lo < 1.2, "steps {lo}..{hi}");
+        for (i, p) in poses.iter().enumerate() {
+            // Rotations orthonormal, no roll: image x stays perpendicular to world y (the
+            // tube bends in the x-z plane, so the transported "down" stays -y).
+            let r = p.fixed_view::<3, 3>(0, 0).into_owned();
+            assert!((r.transpose() * r - crate::math::Matrix3::identity()).norm() < 1e-9);
+            assert!((r.determinant() - 1.0).abs() < 1e-9);
+            assert!(r[(1, 0)].abs() < 1e-6, "pose {i}: rolled");
+            assert!(r[(1, 1)] < -0.999, "pose {i}: down is {:?}", r.column(1));
+        }
+        // Looks along the tube: down (+z) at the start, along +x at the end.
+        assert!(poses[0][(2, 2)] > 0.9 && poses[19][(0, 2)] > 0.9);
+    }
+
+    #[test]
+    fn cameras_outside_the_mask_or_disconnected_are_errors_naming_the_file() {
+        let mut m = bent_tube();
+        let opts = FlythroughOptions::default();
+        let down = Vector3::new(0.0, -1.0, 0.0);
+        let inside = Point3::new(10.0, 10.0, 4.0);
+        let far = Point3::new(30.0, 10.0, 5.0); // 16 mm from the tube
+        let e = flythrough_poses(&m, Path::new("seg.nii.gz"), inside, far, down, &opts)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("seg.nii.gz") && e.contains("last training camera"),
+            "{e}"
+        );
+        // Cut the tube: no path.
+        for y in 0..40 {
+            for x in 0..84 {
+                m.set(x, y, 30, 0);
+            }
+        }
+        let e = flythrough_poses(
+            &m,
+            Path::new("seg.nii.gz"),
+            inside,
+            Point3::new(36.0, 10.0, 25.0),
+            down,
+            &opts,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("seg.nii.gz") && e.contains("no airway path"),
+            "{e}"
+        );
+    }
+}
