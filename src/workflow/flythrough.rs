@@ -115,10 +115,7 @@ pub fn flythrough(
         flythrough_poses(&mask, &seg_path, first, last, down0, opts)?;
 
     let dir = OutputDir::create(out, opts.force)?;
-    let camera = opts
-        .camera
-        .clone()
-        .unwrap_or_else(|| model.manifest.camera.clone());
+    let camera = opts.camera.unwrap_or(model.manifest.camera);
     let rays = ViewRays::new(&camera, 1)?;
     let ropts = RenderOptions {
         shading: opts.shading,
@@ -246,17 +243,14 @@ fn outside(mask_path: &Path, which: &str, p: Point3<f64>, max_mm: f64) -> Error 
 fn snap(mask: &Volume<u8>, p: Point3<f64>, max_mm: f64) -> Option<usize> {
     let ijk = mask.world_to_index(p);
     let sp = mask.spacing();
-    // Index ranges (inclusive) of the box of half-width `max_mm` around `p`, clamped to the grid.
+    // Index ranges of the box of half-width `max_mm` around `p`, clamped to the grid (empty
+    // when the box misses it).
     let range = |k: usize| {
         let lo = (ijk[k] - max_mm / sp[k]).floor().max(0.0);
         let hi = (ijk[k] + max_mm / sp[k])
             .ceil()
             .min(mask.dims[k] as f64 - 1.0);
-        if hi < lo {
-            1..=0 // empty: the box misses the grid
-        } else {
-            lo as usize..=hi as usize
-        }
+        lo as usize..(hi + 1.0).max(lo) as usize
     };
     let mut best: Option<(f64, usize)> = None;
     for z in range(2) {
