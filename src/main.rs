@@ -7,6 +7,7 @@ use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::render::{RenderOptions, ShadingMode};
 use bronchosim::workflow::build::{build_model, BuildOptions, ShadingChoice};
 use bronchosim::workflow::demo::run_demo;
+use bronchosim::workflow::flythrough::{flythrough, FlythroughOptions};
 use bronchosim::workflow::render::{render_command, RenderCommandOptions};
 use bronchosim::workflow::segment::{
     default_segment_out, parse_point, segment_command, SegmentCommandOptions,
@@ -173,6 +174,25 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         supersample: u32,
         /// Replace an existing output folder.
+        #[arg(long)]
+        force: bool,
+    },
+    /// Fly along the airway's centre line through the textured region (first to last training
+    /// camera): DIR/frame_0000.png …, DIR/path.json (views for `render`) and, with ffmpeg,
+    /// DIR/flythrough.mp4.
+    Flythrough {
+        /// The model folder (from `bronchosim build`).
+        model: PathBuf,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Number of frames.
+        #[arg(long, default_value_t = 120)]
+        frames: usize,
+        /// Frame rate of the video (frames per second).
+        #[arg(long, default_value_t = 25)]
+        fps: u32,
+        /// Replace the output folder if it exists.
         #[arg(long)]
         force: bool,
     },
@@ -444,6 +464,36 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     s.images.len() as f64 / s.render_seconds.max(1e-9),
                     s.shading,
                     s.load_seconds
+                );
+            }
+            Ok(())
+        }
+        Command::Flythrough {
+            model,
+            out,
+            frames,
+            fps,
+            force,
+        } => {
+            let opts = FlythroughOptions {
+                frames,
+                fps,
+                force,
+                quiet: cli.quiet,
+                ..Default::default()
+            };
+            let s = flythrough(&model, &out, &opts)
+                .with_context(|| format!("flythrough {}", model.display()))?;
+            if !cli.quiet {
+                println!(
+                    "{}: {} frames along {:.1} mm (clearance >= {:.1} mm) in {:.1} s ({:.1} frames/s); {}",
+                    s.out.display(),
+                    s.frames,
+                    s.path_length_mm,
+                    s.min_clearance_mm,
+                    s.render_seconds,
+                    s.frames as f64 / s.render_seconds.max(1e-9),
+                    s.video_note
                 );
             }
             Ok(())

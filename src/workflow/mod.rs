@@ -5,6 +5,7 @@ pub mod build;
 pub mod build_frames;
 pub mod cross_validate;
 pub mod demo;
+pub mod flythrough;
 pub mod new_views_figure;
 pub mod progress;
 pub mod render;
