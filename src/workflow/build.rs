@@ -96,6 +96,9 @@ impl Default for BuildOptions {
             fit: FitOptions::default(),
             fusion: FusionOptions::default(),
             shading: ShadingChoice::default(),
+            // No inter-reflection term a_f by default: measured on the phantom (24 and 80
+            // frames) it gained 0.5 dB on the truth views but lost 0.3 dB / gained 0.15 dB on
+            // held-out frames, and it trades with s(theta) (cone error 1.7% -> 6.6% RMS).
             calibrated: CalibratedOptions::default(),
             pool: PoolOptions::default(),
             cross_validate_every: 5,
