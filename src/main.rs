@@ -91,7 +91,7 @@ enum Command {
         texel_mm: f64,
         /// Fusion of the de-lit frames: "max" (the paper's max-weight choice with smoothed
         /// weights) or "average" (predicted-intensity-weighted average).
-        #[arg(long, default_value = "max")]
+        #[arg(long, default_value = "average")]
         fusion: String,
         /// Shading model of the texture and of new views: "paper" (per-viewpoint Psi),
         /// "calibrated" (one light for the whole video) or "auto" (the one that predicts

@@ -38,6 +38,16 @@ pub enum FusionMethod {
     WeightedAverage,
 }
 
+impl FusionMethod {
+    /// Streaming passes over the frames [`fuse`] makes with this method.
+    pub fn passes(&self) -> usize {
+        match self {
+            FusionMethod::MaxWeightSmoothed { .. } => 2,
+            FusionMethod::WeightedAverage => 1,
+        }
+    }
+}
+
 /// Options of [`fuse`].
 ///
 /// Steps: de-light every texel in every frame ([`DelightOptions`]), then combine by `method`.

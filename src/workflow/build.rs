@@ -27,7 +27,7 @@ use crate::shading::psi::PsiModel;
 use crate::shading::samples::{extract_samples, SampleOptions, SampleSet};
 use crate::shading::weights::{density_weights, WeightOptions};
 use crate::texture::atlas::{build_atlas, rasterize_texels, AtlasOptions};
-use crate::texture::fusion::{fuse, FusionOptions};
+use crate::texture::fusion::{fuse, FusionMethod, FusionOptions};
 use crate::texture::output::{encode_albedo, write_texture_outputs};
 use crate::texture::texels::TexelSet;
 use crate::workflow::build_frames::{CaseFrames, DepthCache, FrameShadingSource};
@@ -94,7 +94,15 @@ impl Default for BuildOptions {
             atlas: AtlasOptions::default(),
             samples: SampleOptions::default(),
             fit: FitOptions::default(),
-            fusion: FusionOptions::default(),
+            // The predicted-intensity-weighted average, not the paper's max-weight choice:
+            // measured on the phantom's truth views (80 frames) it renders new views 1.6 dB
+            // better with the calibrated light (31.5 vs 29.9 dB) and 0.9 dB better with Psi;
+            // max-weight keeps sharper texture (albedo error 11.7% vs 12.5%, held-out frames
+            // +0.25 dB). `--fusion max` selects the paper's method.
+            fusion: FusionOptions {
+                method: FusionMethod::WeightedAverage,
+                ..Default::default()
+            },
             shading: ShadingChoice::default(),
             // No inter-reflection term a_f by default: measured on the phantom (24 and 80
             // frames) it gained 0.5 dB on the truth views but lost 0.3 dB / gained 0.15 dB on
@@ -319,7 +327,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
 
     // De-light and fuse all frames with the chosen model (two streaming passes for max-weight).
     let t = Instant::now();
-    let passes = 2;
+    let passes = opts.fusion.method.passes();
     let source = match (shading_model.as_str(), &calibrated) {
         ("calibrated", Some(c)) => FrameShadingSource::Calibrated(c),
         _ => FrameShadingSource::Paper(&psi),

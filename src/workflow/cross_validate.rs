@@ -153,7 +153,7 @@ pub fn cross_validate(
     }
     let mut out = Vec::new();
     for (name, source, calibrated) in models {
-        let passes = 2;
+        let passes = inp.fusion.method.passes();
         let mut stream = CaseFrames::new(
             inp.case,
             inp.scene,
