@@ -9,6 +9,7 @@
 mod bvh;
 mod bvh_build;
 mod gbuffer;
+mod packet;
 mod scene;
 pub mod triangle;
 

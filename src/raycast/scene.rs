@@ -157,6 +157,49 @@ impl Scene {
         }
     }
 
+    /// [`Scene::closest_hit`] for rays that share one origin (a camera's pixels), on the calling
+    /// thread: consecutive groups of eight rays are traced together as one packet, which is
+    /// fastest when they are coherent (neighbouring pixels). Each `out[i]` gets the nearest hit
+    /// along `dirs[i]` with `0 < t < tmax` — the same as `closest_hit(origin, dirs[i], tmax)`
+    /// (the same triangle unless two tie at exactly the same `t`).
+    ///
+    /// # Panics
+    /// When `out.len() != dirs.len()` (a caller bug, not an input error).
+    pub fn closest_hits_common_origin(
+        &self,
+        origin: [f32; 3],
+        dirs: &[[f32; 3]],
+        tmax: f32,
+        out: &mut [Option<Hit>],
+    ) {
+        assert_eq!(
+            dirs.len(),
+            out.len(),
+            "closest_hits_common_origin: one output per ray"
+        );
+        const CHUNK: usize = 64;
+        let mut raw = [None; CHUNK];
+        for (d, o) in dirs.chunks(CHUNK).zip(out.chunks_mut(CHUNK)) {
+            let raw = &mut raw[..d.len()];
+            match &self.bvh {
+                Accel::W4(b) => b.closest_hits_packets(origin, d, tmax, raw),
+                // SAFETY: W8 is only built when AVX2 was detected.
+                #[cfg(target_arch = "x86_64")]
+                Accel::W8(b) => unsafe { b.closest_hits_packets(origin, d, tmax, raw) },
+                #[cfg(not(target_arch = "x86_64"))]
+                Accel::W8(_) => unreachable!("eight-wide BVH is only built on x86_64"),
+            }
+            for (o, r) in o.iter_mut().zip(raw.iter()) {
+                *o = r.map(|h| Hit {
+                    t: h.t,
+                    tri: h.tri,
+                    u: h.u,
+                    v: h.v,
+                });
+            }
+        }
+    }
+
     /// [`Scene::closest_hit`] for many rays in parallel; `origins` and `dirs` have equal length.
     pub fn closest_hits(
         &self,

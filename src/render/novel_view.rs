@@ -181,48 +181,62 @@ pub fn render_view_with(
         .par_chunks_mut(3 * w)
         .zip(mask.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(y, (row, mrow))| {
-            for x in 0..w {
-                let p = y * w + x;
-                let mut acc = [0.0f32; 3];
-                let mut hits = 0u32;
-                for d in &rays.dirs[p * ss..(p + 1) * ss] {
-                    let dir = std::array::from_fn(|i| {
-                        rot[i][0] * d[0] + rot[i][1] * d[1] + rot[i][2] * d[2]
-                    });
-                    let Some(hit) = inputs.scene.closest_hit(org, dir, f32::INFINITY) else {
-                        continue;
-                    };
-                    let n = inputs.scene.shading_normal(hit.tri, hit.u, hit.v);
-                    let gamma = (n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2])
-                        .abs()
-                        .min(1.0);
-                    let z = hit.t;
-                    let [a, b, c] = inputs.tri_uv[hit.tri as usize];
-                    let wa = 1.0 - hit.u - hit.v;
-                    let u = wa * a[0] + hit.u * b[0] + hit.v * c[0];
-                    let v = wa * a[1] + hit.u * b[1] + hit.v * c[1];
-                    let albedo = if opts.mipmap {
-                        // Footprint along the surface's steepest direction: z·angle/gamma.
-                        let fp = z * rays.pixel_angle[p] * angle_scale / gamma.max(1e-3);
-                        tex.sample(u, v, tex.lod(fp))
-                    } else {
-                        tex.sample_bilinear(u, v)
-                    };
-                    let psi = shade.eval_rgb(gamma, z);
-                    for k in 0..3 {
-                        acc[k] += psi[k] * albedo[k];
+        .for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(dirs, hits), (y, (row, mrow))| {
+                // Trace the row's rays together (packets of neighbouring rays), then shade.
+                let row_dirs = &rays.dirs[y * w * ss..(y + 1) * w * ss];
+                dirs.clear();
+                dirs.extend(row_dirs.iter().map(|d| -> [f32; 3] {
+                    std::array::from_fn(|i| rot[i][0] * d[0] + rot[i][1] * d[1] + rot[i][2] * d[2])
+                }));
+                hits.clear();
+                hits.resize(dirs.len(), None);
+                inputs
+                    .scene
+                    .closest_hits_common_origin(org, dirs, f32::INFINITY, hits);
+                for x in 0..w {
+                    let p = y * w + x;
+                    let mut acc = [0.0f32; 3];
+                    let mut n_hit = 0u32;
+                    for (dir, hit) in dirs[x * ss..(x + 1) * ss]
+                        .iter()
+                        .zip(&hits[x * ss..(x + 1) * ss])
+                    {
+                        let Some(hit) = hit else {
+                            continue;
+                        };
+                        let n = inputs.scene.shading_normal(hit.tri, hit.u, hit.v);
+                        let gamma = (n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2])
+                            .abs()
+                            .min(1.0);
+                        let z = hit.t;
+                        let [a, b, c] = inputs.tri_uv[hit.tri as usize];
+                        let wa = 1.0 - hit.u - hit.v;
+                        let u = wa * a[0] + hit.u * b[0] + hit.v * c[0];
+                        let v = wa * a[1] + hit.u * b[1] + hit.v * c[1];
+                        let albedo = if opts.mipmap {
+                            // Footprint along the surface's steepest direction: z·angle/gamma.
+                            let fp = z * rays.pixel_angle[p] * angle_scale / gamma.max(1e-3);
+                            tex.sample(u, v, tex.lod(fp))
+                        } else {
+                            tex.sample_bilinear(u, v)
+                        };
+                        let psi = shade.eval_rgb(gamma, z);
+                        for k in 0..3 {
+                            acc[k] += psi[k] * albedo[k];
+                        }
+                        n_hit += 1;
                     }
-                    hits += 1;
-                }
-                if hits > 0 {
-                    let s = opts.gain / hits as f32;
-                    for k in 0..3 {
-                        row[3 * x + k] = acc[k] * s;
+                    if n_hit > 0 {
+                        let s = opts.gain / n_hit as f32;
+                        for k in 0..3 {
+                            row[3 * x + k] = acc[k] * s;
+                        }
+                        mrow[x] = true;
                     }
-                    mrow[x] = true;
                 }
-            }
-        });
+            },
+        );
     Ok((frame, mask))
 }
