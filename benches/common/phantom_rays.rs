@@ -7,6 +7,8 @@
 //! random frame's camera centre to the wall it sees).
 //!
 //! Everything is deterministic: the case is written once into `DIR/case` and reused.
+//! (Included with `#[path]`, so not every item is used by every includer.)
+#![allow(dead_code)]
 
 use bronchosim::io::mesh_export::read_ply;
 use bronchosim::io::poses::read_poses;

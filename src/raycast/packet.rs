@@ -16,7 +16,7 @@
 //! triangle unless two triangles tie at exactly the same distance).
 
 use super::bvh::{Bvh, Node, RawHit, EMPTY, FAR_SCALE, LEAF, STACK};
-use super::triangle::{intersect4, ShearedRay};
+use super::triangle::{edges_f64, intersect4, ShearedRay, Tri4};
 use std::mem::MaybeUninit;
 use wide::{f32x4, f32x8, CmpLe};
 
@@ -36,6 +36,11 @@ pub(crate) struct Packet {
     /// Axes on which the directions change sign (no interval bound).
     mixed: [bool; 3],
     shear: [ShearedRay; PACKET],
+    /// True when every ray has the same axis permutation `shear[r].k`: the triangle test can
+    /// then run over the eight rays at once.
+    same_k: bool,
+    /// Shear constants per ray (lanes), for that test.
+    s: [[f32; PACKET]; 3],
 }
 
 impl Packet {
@@ -68,6 +73,8 @@ impl Packet {
             ihi[a] = inv[a].iter().copied().fold(f32::NEG_INFINITY, f32::max);
             mixed[a] = ilo[a] < 0.0 && ihi[a] > 0.0;
         }
+        let same_k = shear.iter().all(|r| r.k == shear[0].k);
+        let s = std::array::from_fn(|i| std::array::from_fn(|r| shear[r].s[i]));
         Packet {
             org,
             inv,
@@ -75,6 +82,8 @@ impl Packet {
             ihi,
             mixed,
             shear,
+            same_k,
+            s,
         }
     }
 }
@@ -87,6 +96,39 @@ trait PacketOps<const W: usize> {
     /// Per-ray test of one box `[min xyz, max xyz]`: mask of the rays that enter it before
     /// their own `tbest`.
     fn rays(&self, p: &Packet, b: [f32; 6], tbest: &[f32; PACKET]) -> u32;
+    /// Watertight test of leaf `tri` for the rays in mask `rays`, updating their nearest hits;
+    /// true when one changed. The default tests one ray (four triangles) at a time.
+    #[inline(always)]
+    fn leaf(&self, p: &Packet, tri: &Tri4, rays: u32, tb: &mut Best) -> bool {
+        per_ray(p, tri, rays, tb)
+    }
+}
+
+/// Nearest hit so far of each ray: distance bound and hit.
+struct Best {
+    t: [f32; PACKET],
+    hit: [Option<RawHit>; PACKET],
+}
+
+/// [`PacketOps::leaf`] one ray at a time with [`intersect4`].
+#[inline(always)]
+fn per_ray(p: &Packet, tri: &Tri4, mut rays: u32, tb: &mut Best) -> bool {
+    let mut changed = false;
+    while rays != 0 {
+        let r = rays.trailing_zeros() as usize;
+        rays &= rays - 1;
+        if let Some((lane, t, u, v)) = intersect4(&p.shear[r], tri, tb.t[r]) {
+            tb.t[r] = t;
+            tb.hit[r] = Some(RawHit {
+                t,
+                tri: tri.id[lane],
+                u,
+                v,
+            });
+            changed = true;
+        }
+    }
+    changed
 }
 
 /// Portable version: SSE through `wide` (four children per node).
@@ -193,6 +235,123 @@ impl PacketOps<8> for Avx {
             _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32
         }
     }
+
+    /// Eight rays against one triangle per step, when the rays share their axis permutation:
+    /// per lane the same operations in the same order as [`intersect4`], so the results are
+    /// bit-identical; taking the triangles in lane order with a strict `t < best` keeps
+    /// intersect4's choice among equal distances.
+    #[inline(always)]
+    fn leaf(&self, p: &Packet, tri: &Tri4, rays: u32, tb: &mut Best) -> bool {
+        use std::arch::x86_64::*;
+        if !p.same_k || rays.count_ones() < 3 {
+            return per_ray(p, tri, rays, tb);
+        }
+        let [kx, ky, kz] = p.shear[0].k;
+        let o = p.org;
+        let mut changed = false;
+        // SAFETY: as above; the loads read whole [f32; 8] arrays.
+        unsafe {
+            let (sx, sy, sz) = (
+                _mm256_loadu_ps(p.s[0].as_ptr()),
+                _mm256_loadu_ps(p.s[1].as_ptr()),
+                _mm256_loadu_ps(p.s[2].as_ptr()),
+            );
+            let zero = _mm256_setzero_ps();
+            for j in 0..4 {
+                // Padding lanes repeat the last triangle: nothing new after the first repeat.
+                if j > 0 && tri.id[j] == tri.id[j - 1] {
+                    break;
+                }
+                let c = |i: usize, k: usize| tri.v[i][k].as_array_ref()[j] - o[k];
+                let (az, bz, cz) = (
+                    _mm256_set1_ps(c(0, kz)),
+                    _mm256_set1_ps(c(1, kz)),
+                    _mm256_set1_ps(c(2, kz)),
+                );
+                let e = |i: usize, k: usize, s: __m256, z: __m256| {
+                    _mm256_sub_ps(_mm256_set1_ps(c(i, k)), _mm256_mul_ps(s, z))
+                };
+                let (ax, ay) = (e(0, kx, sx, az), e(0, ky, sy, az));
+                let (bx, by) = (e(1, kx, sx, bz), e(1, ky, sy, bz));
+                let (cx, cy) = (e(2, kx, sx, cz), e(2, ky, sy, cz));
+                let mut u = _mm256_sub_ps(_mm256_mul_ps(cx, by), _mm256_mul_ps(cy, bx));
+                let mut v = _mm256_sub_ps(_mm256_mul_ps(ax, cy), _mm256_mul_ps(ay, cx));
+                let mut w = _mm256_sub_ps(_mm256_mul_ps(bx, ay), _mm256_mul_ps(by, ax));
+                let zmask = _mm256_movemask_ps(_mm256_or_ps(
+                    _mm256_or_ps(
+                        _mm256_cmp_ps::<_CMP_EQ_OQ>(u, zero),
+                        _mm256_cmp_ps::<_CMP_EQ_OQ>(v, zero),
+                    ),
+                    _mm256_cmp_ps::<_CMP_EQ_OQ>(w, zero),
+                )) as u32
+                    & rays;
+                if zmask != 0 {
+                    // Rare: a ray through an edge or vertex; redo those lanes in f64.
+                    let arr = |x: __m256| {
+                        let mut a = [0f32; 8];
+                        _mm256_storeu_ps(a.as_mut_ptr(), x);
+                        a
+                    };
+                    let (axa, aya, bxa, bya, cxa, cya) =
+                        (arr(ax), arr(ay), arr(bx), arr(by), arr(cx), arr(cy));
+                    let (mut ua, mut va, mut wa) = (arr(u), arr(v), arr(w));
+                    let mut m = zmask;
+                    while m != 0 {
+                        let r = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        (ua[r], va[r], wa[r]) =
+                            edges_f64(axa[r], aya[r], bxa[r], bya[r], cxa[r], cya[r]);
+                    }
+                    u = _mm256_loadu_ps(ua.as_ptr());
+                    v = _mm256_loadu_ps(va.as_ptr());
+                    w = _mm256_loadu_ps(wa.as_ptr());
+                }
+                let lt = |x: __m256| _mm256_cmp_ps::<_CMP_LT_OQ>(x, zero);
+                let gt = |x: __m256| _mm256_cmp_ps::<_CMP_GT_OQ>(x, zero);
+                let any_neg = _mm256_or_ps(_mm256_or_ps(lt(u), lt(v)), lt(w));
+                let any_pos = _mm256_or_ps(_mm256_or_ps(gt(u), gt(v)), gt(w));
+                let det = _mm256_add_ps(_mm256_add_ps(u, v), w);
+                let ts = _mm256_add_ps(
+                    _mm256_add_ps(
+                        _mm256_mul_ps(u, _mm256_mul_ps(sz, az)),
+                        _mm256_mul_ps(v, _mm256_mul_ps(sz, bz)),
+                    ),
+                    _mm256_mul_ps(w, _mm256_mul_ps(sz, cz)),
+                );
+                let t = _mm256_div_ps(ts, det);
+                let inside = _mm256_andnot_ps(_mm256_and_ps(any_neg, any_pos), gt(t));
+                let ok = _mm256_and_ps(
+                    inside,
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(t, _mm256_loadu_ps(tb.t.as_ptr())),
+                );
+                let mut m = _mm256_movemask_ps(ok) as u32 & rays;
+                if m == 0 {
+                    continue;
+                }
+                let mut ta = [0f32; 8];
+                let mut da = [0f32; 8];
+                let mut va = [0f32; 8];
+                let mut wa = [0f32; 8];
+                _mm256_storeu_ps(ta.as_mut_ptr(), t);
+                _mm256_storeu_ps(da.as_mut_ptr(), det);
+                _mm256_storeu_ps(va.as_mut_ptr(), v);
+                _mm256_storeu_ps(wa.as_mut_ptr(), w);
+                while m != 0 {
+                    let r = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    tb.t[r] = ta[r];
+                    tb.hit[r] = Some(RawHit {
+                        t: ta[r],
+                        tri: tri.id[j],
+                        u: va[r] / da[r],
+                        v: wa[r] / da[r],
+                    });
+                }
+                changed = true;
+            }
+        }
+        changed
+    }
 }
 
 impl<const W: usize> Bvh<W> {
@@ -205,10 +364,11 @@ impl<const W: usize> Bvh<W> {
         valid: u32,
         tmax: f32,
     ) -> [Option<RawHit>; PACKET] {
-        let mut best: [Option<RawHit>; PACKET] = [None; PACKET];
         // Invalid lanes get a negative bound so that they never enter a leaf.
-        let mut tbest: [f32; PACKET] =
-            std::array::from_fn(|r| if valid >> r & 1 != 0 { tmax } else { -1.0 });
+        let mut tb = Best {
+            t: std::array::from_fn(|r| if valid >> r & 1 != 0 { tmax } else { -1.0 }),
+            hit: [None; PACKET],
+        };
         let mut tpk = tmax;
         // Entries: (child handle, parent node * W + slot, packet entry distance).
         let mut stack: [MaybeUninit<(u32, u32, f32)>; STACK] = [MaybeUninit::uninit(); STACK];
@@ -263,32 +423,16 @@ impl<const W: usize> Bvh<W> {
                 let parent = &self.nodes[slot as usize / W];
                 let j = slot as usize % W;
                 let b = std::array::from_fn(|i| parent.b[i][j]);
-                let mut rays = ops.rays(p, b, &tbest) & valid;
-                if rays != 0 {
-                    let tri = &self.leaves[(node & !LEAF) as usize];
-                    let mut changed = false;
-                    while rays != 0 {
-                        let r = rays.trailing_zeros() as usize;
-                        rays &= rays - 1;
-                        if let Some((lane, t, u, v)) = intersect4(&p.shear[r], tri, tbest[r]) {
-                            tbest[r] = t;
-                            best[r] = Some(RawHit {
-                                t,
-                                tri: tri.id[lane],
-                                u,
-                                v,
-                            });
-                            changed = true;
-                        }
-                    }
-                    if changed {
-                        tpk = tbest.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-                    }
+                let rays = ops.rays(p, b, &tb.t) & valid;
+                if rays != 0
+                    && ops.leaf(p, &self.leaves[(node & !LEAF) as usize], rays, &mut tb)
+                {
+                    tpk = tb.t.iter().copied().fold(f32::NEG_INFINITY, f32::max);
                 }
             }
             loop {
                 if sp == 0 {
-                    return best;
+                    return tb.hit;
                 }
                 sp -= 1;
                 // SAFETY: entries below sp were written by the pushes above.

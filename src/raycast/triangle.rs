@@ -64,7 +64,7 @@ pub struct TriHit {
 
 /// Edge functions in f64, used when the f32 ones are exactly zero (paper, section 3).
 #[inline(never)]
-fn edges_f64(ax: f32, ay: f32, bx: f32, by: f32, cx: f32, cy: f32) -> (f32, f32, f32) {
+pub(crate) fn edges_f64(ax: f32, ay: f32, bx: f32, by: f32, cx: f32, cy: f32) -> (f32, f32, f32) {
     let (ax, ay, bx, by, cx, cy) = (
         ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
     );
