@@ -4,8 +4,8 @@
 Same mesh (the phantom's true lumen, `bronchosim phantom` truth/lumen.ply, ~260k triangles)
 and the same rays (benches/common/phantom_rays.rs, written by `examples/write_bench_mesh.rs`):
 a 512x512 pinhole camera inside the trachea, and 2^20 incoherent random rays from points
-inside the lumen. Ours traces the camera as packets along image rows
-(`Scene::closest_hits_common_origin`, row `camera`) and also one ray at a time
+inside the lumen. Ours traces the camera as packets of 4x2 pixels
+(`Scene::closest_hits_image_rows`, row `camera`) and also one ray at a time
 (`camera_single`); the random rays one at a time.
 
 embreex's `EmbreeScene.run` traces the whole batch on the calling thread. The "2 threads"

@@ -1,7 +1,7 @@
 //! Time closest-hit ray casting on the benchmark scene (benches/common/phantom_rays.rs, the
 //! phantom lumen; written into DIR on first use) and print one JSON line: build seconds, and
 //! Mrays/s (wall) and Mrays per CPU-second for the 512x512 camera traced as packets
-//! (`camera`, rows of the image through `Scene::closest_hits_common_origin`, parallel over rows),
+//! (`camera`, pairs of image rows through `Scene::closest_hits_image_rows`, in parallel),
 //! the same camera rays one at a time (`camera_single`), and the random rays (`random`). Thread
 //! count follows RAYON_NUM_THREADS. The hit triangle ids (i32, -1 = miss) are written to
 //! DIR/ours_camera.bin and DIR/ours_random.bin so the caller can compare hits.
@@ -42,9 +42,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let w = phantom_rays::SIDE;
     let packets = |s: &Scene| {
         let mut out = vec![None; b.camera.dirs.len()];
-        out.par_chunks_mut(w)
-            .zip(b.camera.dirs.par_chunks(w))
-            .for_each(|(o, d)| s.closest_hits_common_origin(org, d, f32::INFINITY, o));
+        out.par_chunks_mut(2 * w)
+            .zip(b.camera.dirs.par_chunks(2 * w))
+            .for_each(|(o, d)| s.closest_hits_image_rows(org, d, w, f32::INFINITY, o));
         out
     };
     type Run<'a> = Box<dyn Fn(&Scene) -> Vec<Option<Hit>> + 'a>;

@@ -359,7 +359,8 @@ fn gbuffer_matches_analytic_cylinder() {
 /// the wall and their neighbours miss), and random directions (packets whose directions change
 /// sign on every axis); also a finite tmax (some rays of a packet stop before the wall) and a
 /// ray count that is not a multiple of eight. Every ray: hit/miss identical, the same triangle
-/// (or an exact tie in t), t within 1e-5 (t + 10).
+/// (or an exact tie in t), t within 1e-5 (t + 10). The camera part (61 x 47 rays: partial 4x2
+/// tiles) also through `closest_hits_image_rows`, which must equal the plain packet call.
 #[test]
 fn packets_match_single_rays() {
     let (m, _) = meshes::branching_airway(0.6);
@@ -409,6 +410,9 @@ fn packets_match_single_rays() {
         for (si, scene) in scenes.iter().enumerate() {
             let mut got = vec![None; dirs.len()];
             scene.closest_hits_common_origin(org, &dirs, tmax, &mut got);
+            let mut tiled = vec![None; w * h];
+            scene.closest_hits_image_rows(org, &dirs[..w * h], w, tmax, &mut tiled);
+            assert_eq!(tiled, got[..w * h], "view {vi}, scene {si}: tiled order");
             for (i, d) in dirs.iter().enumerate() {
                 let one = scene.closest_hit(org, *d, tmax);
                 let ctx = format!("view {vi}, scene {si}, ray {i} {d:?}");

@@ -100,8 +100,8 @@ pub fn cast_frame(scene: &Scene, camera: &Camera, camera_to_world: &Affine) -> G
     cast_frame_with(scene, &RayTable::new(camera), camera_to_world)
 }
 
-/// Ray cast one frame with precomputed pixel rays (parallel over image rows; each row is traced
-/// in packets of eight neighbouring rays, [`Scene::closest_hits_common_origin`]).
+/// Ray cast one frame with precomputed pixel rays (parallel over pairs of image rows, traced in
+/// packets of 4x2 neighbouring rays by [`Scene::closest_hits_image_rows`]).
 pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine) -> GBuffer {
     let m = camera_to_world;
     let org = [m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32];
@@ -113,9 +113,10 @@ pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine)
     };
     let w = (rays.width as usize).max(1);
     let mut px = vec![MISS; rays.dirs.len()];
-    // One image row per task, traced as packets of neighbouring rays, then turned into records.
-    px.par_chunks_mut(w)
-        .zip(rays.dirs.par_chunks(w))
+    // Two image rows per task, traced as packets of 4x2 neighbouring rays, then turned into
+    // records.
+    px.par_chunks_mut(2 * w)
+        .zip(rays.dirs.par_chunks(2 * w))
         .for_each_init(
             || (Vec::new(), Vec::new()),
             |(dirs, hits), (out, row)| {
@@ -123,7 +124,7 @@ pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine)
                 dirs.extend(row.iter().map(r));
                 hits.clear();
                 hits.resize(dirs.len(), None);
-                scene.closest_hits_common_origin(org, dirs, f32::INFINITY, hits);
+                scene.closest_hits_image_rows(org, dirs, w, f32::INFINITY, hits);
                 for ((o, dir), h) in out.iter_mut().zip(dirs.iter()).zip(hits.iter()) {
                     let Some(h) = h else {
                         continue;

@@ -48,23 +48,22 @@ impl Packet {
     #[inline(always)]
     pub(crate) fn new(org: [f32; 3], dirs: &[[f32; 3]]) -> Packet {
         debug_assert!(!dirs.is_empty() && dirs.len() <= PACKET);
-        let mut inv = [[0f32; PACKET]; 3];
-        let mut shear = [ShearedRay::new(org, dirs[0]); PACKET];
-        for r in 0..PACKET {
-            let d = dirs[if r < dirs.len() { r } else { 0 }];
-            for a in 0..3 {
-                // As TravRay::new: a zero component becomes a tiny one of the same sign.
-                let c = if d[a] == 0.0 {
-                    1e-30f32.copysign(d[a])
+        let d: [[f32; 3]; PACKET] = std::array::from_fn(|r| dirs[if r < dirs.len() { r } else { 0 }]);
+        // As TravRay::new: a zero component becomes a tiny one of the same sign. One vector
+        // division per axis (IEEE, the same values as the scalar one).
+        let inv: [[f32; PACKET]; 3] = std::array::from_fn(|a| {
+            let c = f32x8::from(std::array::from_fn::<f32, PACKET, _>(|r| {
+                if d[r][a] == 0.0 {
+                    1e-30f32.copysign(d[r][a])
                 } else {
-                    d[a]
-                };
-                inv[a][r] = 1.0 / c;
-            }
-            if r > 0 {
-                shear[r] = ShearedRay::new(org, d);
-            }
-        }
+                    d[r][a]
+                }
+            }));
+            (f32x8::splat(1.0) / c).to_array()
+        });
+        let shear: [ShearedRay; PACKET] = std::array::from_fn(|r| {
+            ShearedRay::with_inv(org, d[r], [inv[0][r], inv[1][r], inv[2][r]])
+        });
         let mut ilo = [0f32; 3];
         let mut ihi = [0f32; 3];
         let mut mixed = [false; 3];

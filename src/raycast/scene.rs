@@ -200,6 +200,62 @@ impl Scene {
         }
     }
 
+    /// [`Scene::closest_hits_common_origin`] for an image block: `dirs` holds rows of
+    /// `row_len` rays each (row-major, e.g. two rows of a camera's pixels). The rays are traced
+    /// in tiles of four columns by two rows — more compact packets than a stretch of one row —
+    /// and `out` is in the order of `dirs`.
+    ///
+    /// # Panics
+    /// When `out.len() != dirs.len()`, or `row_len` is 0 or does not divide `dirs.len()`.
+    pub fn closest_hits_image_rows(
+        &self,
+        origin: [f32; 3],
+        dirs: &[[f32; 3]],
+        row_len: usize,
+        tmax: f32,
+        out: &mut [Option<Hit>],
+    ) {
+        assert!(
+            dirs.len() == out.len() && row_len > 0 && dirs.len() % row_len == 0,
+            "closest_hits_image_rows: {} rays, {} outputs, rows of {row_len}",
+            dirs.len(),
+            out.len()
+        );
+        const CHUNK: usize = 64;
+        let mut idx = [0usize; CHUNK];
+        let mut d = [[0f32; 3]; CHUNK];
+        let mut h = [None; CHUNK];
+        let mut n = 0;
+        let rows = dirs.len() / row_len;
+        let mut flush = |idx: &[usize], d: &[[f32; 3]], h: &mut [Option<Hit>]| {
+            self.closest_hits_common_origin(origin, d, tmax, h);
+            for (&i, &hit) in idx.iter().zip(h.iter()) {
+                out[i] = hit;
+            }
+        };
+        for y0 in (0..rows).step_by(2) {
+            let y1 = (y0 + 2).min(rows);
+            for x0 in (0..row_len).step_by(4) {
+                let x1 = (x0 + 4).min(row_len);
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        let i = y * row_len + x;
+                        idx[n] = i;
+                        d[n] = dirs[i];
+                        n += 1;
+                        if n == CHUNK {
+                            flush(&idx, &d, &mut h);
+                            n = 0;
+                        }
+                    }
+                }
+            }
+        }
+        if n > 0 {
+            flush(&idx[..n], &d[..n], &mut h[..n]);
+        }
+    }
+
     /// [`Scene::closest_hit`] for many rays in parallel; `origins` and `dirs` have equal length.
     pub fn closest_hits(
         &self,

@@ -143,7 +143,7 @@ pub fn render_view(
 }
 
 /// [`render_view`] with precomputed rays (`opts.supersample` is taken from `rays`). Parallel
-/// over rows.
+/// over pairs of image rows, traced as packets of neighbouring rays.
 pub fn render_view_with(
     inputs: &RenderInputs,
     rays: &ViewRays,
@@ -178,14 +178,15 @@ pub fn render_view_with(
     let mut mask = vec![false; w * h];
     frame
         .rgb
-        .par_chunks_mut(3 * w)
-        .zip(mask.par_chunks_mut(w))
+        .par_chunks_mut(3 * w * 2)
+        .zip(mask.par_chunks_mut(w * 2))
         .enumerate()
         .for_each_init(
             || (Vec::new(), Vec::new()),
-            |(dirs, hits), (y, (row, mrow))| {
-                // Trace the row's rays together (packets of neighbouring rays), then shade.
-                let row_dirs = &rays.dirs[y * w * ss..(y + 1) * w * ss];
+            |(dirs, hits), (c, (rows, mrows))| {
+                // Trace two rows' rays together (packets of neighbouring rays), then shade.
+                let (y0, ny) = (2 * c, mrows.len() / w);
+                let row_dirs = &rays.dirs[y0 * w * ss..(y0 + ny) * w * ss];
                 dirs.clear();
                 dirs.extend(row_dirs.iter().map(|d| -> [f32; 3] {
                     std::array::from_fn(|i| rot[i][0] * d[0] + rot[i][1] * d[1] + rot[i][2] * d[2])
@@ -194,14 +195,14 @@ pub fn render_view_with(
                 hits.resize(dirs.len(), None);
                 inputs
                     .scene
-                    .closest_hits_common_origin(org, dirs, f32::INFINITY, hits);
-                for x in 0..w {
-                    let p = y * w + x;
+                    .closest_hits_image_rows(org, dirs, w * ss, f32::INFINITY, hits);
+                for i in 0..ny * w {
+                    let p = y0 * w + i;
                     let mut acc = [0.0f32; 3];
                     let mut n_hit = 0u32;
-                    for (dir, hit) in dirs[x * ss..(x + 1) * ss]
+                    for (dir, hit) in dirs[i * ss..(i + 1) * ss]
                         .iter()
-                        .zip(&hits[x * ss..(x + 1) * ss])
+                        .zip(&hits[i * ss..(i + 1) * ss])
                     {
                         let Some(hit) = hit else {
                             continue;
@@ -231,9 +232,9 @@ pub fn render_view_with(
                     if n_hit > 0 {
                         let s = opts.gain / n_hit as f32;
                         for k in 0..3 {
-                            row[3 * x + k] = acc[k] * s;
+                            rows[3 * i + k] = acc[k] * s;
                         }
-                        mrow[x] = true;
+                        mrows[i] = true;
                     }
                 }
             },
