@@ -15,7 +15,7 @@
 //! superset of the leaves single-ray traversal tests and gets the same nearest hit (the same
 //! triangle unless two triangles tie at exactly the same distance).
 
-use super::bvh::{Bvh, Node, RawHit, EMPTY, FAR_SCALE, LEAF, STACK};
+use super::bvh::{leaf_blocks, Bvh, Node, RawHit, EMPTY, FAR_SCALE, LEAF, STACK};
 use super::triangle::{edges_f64, intersect4, ShearedRay, Tri4};
 use std::mem::MaybeUninit;
 use wide::{f32x4, f32x8, CmpLe};
@@ -423,10 +423,14 @@ impl<const W: usize> Bvh<W> {
                 let j = slot as usize % W;
                 let b = std::array::from_fn(|i| parent.b[i][j]);
                 let rays = ops.rays(p, b, &tb.t) & valid;
-                if rays != 0
-                    && ops.leaf(p, &self.leaves[(node & !LEAF) as usize], rays, &mut tb)
-                {
-                    tpk = tb.t.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+                if rays != 0 {
+                    let mut changed = false;
+                    for tri in &self.leaves[leaf_blocks(node)] {
+                        changed |= ops.leaf(p, tri, rays, &mut tb);
+                    }
+                    if changed {
+                        tpk = tb.t.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+                    }
                 }
             }
             loop {
