@@ -401,8 +401,12 @@ fn packets_match_single_rays() {
             dirs.push(d);
         }
         for packet in dirs.chunks(8) {
-            let neg = (0..3).filter(|&a| packet.iter().any(|d| d[a] < 0.0)).count();
-            let pos = (0..3).filter(|&a| packet.iter().any(|d| d[a] > 0.0)).count();
+            let neg = (0..3)
+                .filter(|&a| packet.iter().any(|d| d[a] < 0.0))
+                .count();
+            let pos = (0..3)
+                .filter(|&a| packet.iter().any(|d| d[a] > 0.0))
+                .count();
             if neg == 3 && pos == 3 {
                 mixed_packets += 1;
             }
@@ -439,7 +443,10 @@ fn packets_match_single_rays() {
         }
     }
     eprintln!("packets: {n_hit} hits, {n_miss} misses, {ties} ties, {mixed_packets} all-axes-mixed packets");
-    assert!(n_hit > 20_000 && n_miss > 2_000, "{n_hit} hits, {n_miss} misses");
+    assert!(
+        n_hit > 20_000 && n_miss > 2_000,
+        "{n_hit} hits, {n_miss} misses"
+    );
     assert!(mixed_packets > 100, "{mixed_packets} mixed packets");
     assert!(ties <= 10, "{ties} ties");
 }

@@ -58,7 +58,8 @@ pub(crate) struct TravRay {
 
 /// Robust box test factor (Ize 2013): far distances are inflated by 1 + 2γ(3) so that rounding
 /// never culls a box the ray touches.
-pub(crate) const FAR_SCALE: f32 = 1.0 + 2.0 * 3.0 * f32::EPSILON * 0.5 / (1.0 - 3.0 * f32::EPSILON * 0.5);
+pub(crate) const FAR_SCALE: f32 =
+    1.0 + 2.0 * 3.0 * f32::EPSILON * 0.5 / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
 impl TravRay {
     #[inline(always)]

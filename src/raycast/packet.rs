@@ -48,7 +48,8 @@ impl Packet {
     #[inline(always)]
     pub(crate) fn new(org: [f32; 3], dirs: &[[f32; 3]]) -> Packet {
         debug_assert!(!dirs.is_empty() && dirs.len() <= PACKET);
-        let d: [[f32; 3]; PACKET] = std::array::from_fn(|r| dirs[if r < dirs.len() { r } else { 0 }]);
+        let d: [[f32; 3]; PACKET] =
+            std::array::from_fn(|r| dirs[if r < dirs.len() { r } else { 0 }]);
         // As TravRay::new: a zero component becomes a tiny one of the same sign. One vector
         // division per axis (IEEE, the same values as the scalar one).
         let inv: [[f32; PACKET]; 3] = std::array::from_fn(|a| {
@@ -142,7 +143,11 @@ impl PacketOps<4> for Portable {
             if p.mixed[a] {
                 continue;
             }
-            let (near, far) = if p.ilo[a] < 0.0 { (3 + a, a) } else { (a, 3 + a) };
+            let (near, far) = if p.ilo[a] < 0.0 {
+                (3 + a, a)
+            } else {
+                (a, 3 + a)
+            };
             let o = f32x4::splat(p.org[a]);
             let (lo, hi) = (f32x4::splat(p.ilo[a]), f32x4::splat(p.ihi[a]));
             let dn = f32x4::from(n.b[near]) - o;
@@ -188,7 +193,11 @@ impl PacketOps<8> for Avx {
                 if p.mixed[a] {
                     continue;
                 }
-                let (near, far) = if p.ilo[a] < 0.0 { (3 + a, a) } else { (a, 3 + a) };
+                let (near, far) = if p.ilo[a] < 0.0 {
+                    (3 + a, a)
+                } else {
+                    (a, 3 + a)
+                };
                 let o = _mm256_set1_ps(p.org[a]);
                 let (lo, hi) = (_mm256_set1_ps(p.ilo[a]), _mm256_set1_ps(p.ihi[a]));
                 let dn = _mm256_sub_ps(_mm256_loadu_ps(n.b[near].as_ptr()), o);
