@@ -4,7 +4,7 @@
 Same mesh (the phantom's true lumen, `bronchosim phantom` truth/lumen.ply, ~260k triangles)
 and the same rays (benches/common/phantom_rays.rs, written by `examples/write_bench_mesh.rs`):
 a 512x512 pinhole camera inside the trachea, and 2^20 incoherent random rays from points
-inside the lumen. Ours traces the camera as packets of 4x2 pixels
+inside the lumen. Ours traces the camera as packets of 4x4 pixels
 (`Scene::closest_hits_image_rows`, row `camera`) and also one ray at a time
 (`camera_single`); the random rays one at a time.
 

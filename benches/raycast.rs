@@ -1,7 +1,7 @@
 //! Ray casting on the phantom lumen (benches/common/phantom_rays.rs: `bronchosim phantom`'s
 //! truth/lumen.ply, about 260k triangles, written on first use into $BRONCHOSIM_BENCH_DIR or
 //! the temporary folder): BVH build, closest hits for a 512x512 camera inside the trachea
-//! (as packets of 4x2 pixels, and one ray at a time) and for 2^20 incoherent rays, and a
+//! (as packets of 4x4 pixels, and one ray at a time) and for 2^20 incoherent rays, and a
 //! full G-buffer frame from the same pose. Threads follow RAYON_NUM_THREADS. Throughput is
 //! reported in rays (elements) per second.
 
@@ -32,8 +32,8 @@ fn bench(c: &mut Criterion) {
         g.bench_function(format!("closest_camera_512_packets{name}"), |bch| {
             let mut out = vec![None; cam.dirs.len()];
             bch.iter(|| {
-                out.par_chunks_mut(2 * side)
-                    .zip(cam.dirs.par_chunks(2 * side))
+                out.par_chunks_mut(Scene::TILE_ROWS * side)
+                    .zip(cam.dirs.par_chunks(Scene::TILE_ROWS * side))
                     .for_each(|(o, d)| {
                         scene.closest_hits_image_rows(cam.origins[0], d, side, f32::INFINITY, o)
                     })

@@ -1,7 +1,7 @@
 //! Time closest-hit ray casting on the benchmark scene (benches/common/phantom_rays.rs, the
 //! phantom lumen; written into DIR on first use) and print one JSON line: build seconds, and
 //! Mrays/s (wall) and Mrays per CPU-second for the 512x512 camera traced as packets
-//! (`camera`, pairs of image rows through `Scene::closest_hits_image_rows`, in parallel),
+//! (`camera`, bands of image rows through `Scene::closest_hits_image_rows`, in parallel),
 //! the same camera rays one at a time (`camera_single`), and the random rays (`random`). Thread
 //! count follows RAYON_NUM_THREADS. The hit triangle ids (i32, -1 = miss) are written to
 //! DIR/ours_camera.bin and DIR/ours_random.bin so the caller can compare hits.
@@ -42,8 +42,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let w = phantom_rays::SIDE;
     let packets = |s: &Scene| {
         let mut out = vec![None; b.camera.dirs.len()];
-        out.par_chunks_mut(2 * w)
-            .zip(b.camera.dirs.par_chunks(2 * w))
+        out.par_chunks_mut(Scene::TILE_ROWS * w)
+            .zip(b.camera.dirs.par_chunks(Scene::TILE_ROWS * w))
             .for_each(|(o, d)| s.closest_hits_image_rows(org, d, w, f32::INFINITY, o));
         out
     };

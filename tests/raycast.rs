@@ -358,8 +358,8 @@ fn gbuffer_matches_analytic_cylinder() {
 /// (coherent camera rows, near and far hits), outside the airway (packets where some rays hit
 /// the wall and their neighbours miss), and random directions (packets whose directions change
 /// sign on every axis); also a finite tmax (some rays of a packet stop before the wall) and a
-/// ray count that is not a multiple of eight. Every ray: hit/miss identical, the same triangle
-/// (or an exact tie in t), t within 1e-5 (t + 10). The camera part (61 x 47 rays: partial 4x2
+/// ray count that is not a multiple of the packet size (16). Every ray: hit/miss identical, the same triangle
+/// (or an exact tie in t), t within 1e-5 (t + 10). The camera part (61 x 47 rays: partial 4x4
 /// tiles) also through `closest_hits_image_rows`, which must equal the plain packet call.
 #[test]
 fn packets_match_single_rays() {
@@ -393,14 +393,14 @@ fn packets_match_single_rays() {
             }
         }
         // Then incoherent packets: random directions, a few of them axis-aligned.
-        for k in 0..8 * 40 + 5 {
+        for k in 0..16 * 20 + 5 {
             let mut d = rng.unit();
             if k % 29 == 0 {
                 d = [0.0, 0.0, if k % 2 == 0 { 1.0 } else { -1.0 }];
             }
             dirs.push(d);
         }
-        for packet in dirs.chunks(8) {
+        for packet in dirs.chunks(16) {
             let neg = (0..3)
                 .filter(|&a| packet.iter().any(|d| d[a] < 0.0))
                 .count();

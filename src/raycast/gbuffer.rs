@@ -100,8 +100,8 @@ pub fn cast_frame(scene: &Scene, camera: &Camera, camera_to_world: &Affine) -> G
     cast_frame_with(scene, &RayTable::new(camera), camera_to_world)
 }
 
-/// Ray cast one frame with precomputed pixel rays (parallel over pairs of image rows, traced in
-/// packets of 4x2 neighbouring rays by [`Scene::closest_hits_image_rows`]).
+/// Ray cast one frame with precomputed pixel rays (parallel over bands of image rows, traced
+/// in packets of neighbouring rays by [`Scene::closest_hits_image_rows`]).
 pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine) -> GBuffer {
     let m = camera_to_world;
     let org = [m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32];
@@ -113,10 +113,10 @@ pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine)
     };
     let w = (rays.width as usize).max(1);
     let mut px = vec![MISS; rays.dirs.len()];
-    // Two image rows per task, traced as packets of 4x2 neighbouring rays, then turned into
-    // records.
-    px.par_chunks_mut(2 * w)
-        .zip(rays.dirs.par_chunks(2 * w))
+    // A band of image rows per task, traced as packets of neighbouring rays (tiles of
+    // 4 x TILE_ROWS), then turned into records.
+    px.par_chunks_mut(Scene::TILE_ROWS * w)
+        .zip(rays.dirs.par_chunks(Scene::TILE_ROWS * w))
         .for_each_init(
             || (Vec::new(), Vec::new()),
             |(dirs, hits), (out, row)| {

@@ -2,6 +2,7 @@
 
 use super::bvh::{Bvh, Node, RawHit};
 use super::bvh_build::build;
+use super::packet::PACKET;
 use crate::mesh::TriMesh;
 use crate::{Error, Result};
 use rayon::prelude::*;
@@ -158,7 +159,7 @@ impl Scene {
     }
 
     /// [`Scene::closest_hit`] for rays that share one origin (a camera's pixels), on the calling
-    /// thread: consecutive groups of eight rays are traced together as one packet, which is
+    /// thread: consecutive groups of [`PACKET`] (16) rays are traced together as one packet, which is
     /// fastest when they are coherent (neighbouring pixels). Each `out[i]` gets the nearest hit
     /// along `dirs[i]` with `0 < t < tmax` — the same as `closest_hit(origin, dirs[i], tmax)`
     /// (the same triangle unless two tie at exactly the same `t`).
@@ -200,10 +201,14 @@ impl Scene {
         }
     }
 
+    /// Rows of the tiles [`Scene::closest_hits_image_rows`] traces together; blocks of a
+    /// multiple of this many rows trace fastest.
+    pub const TILE_ROWS: usize = PACKET / 4;
+
     /// [`Scene::closest_hits_common_origin`] for an image block: `dirs` holds rows of
-    /// `row_len` rays each (row-major, e.g. two rows of a camera's pixels). The rays are traced
-    /// in tiles of four columns by two rows — more compact packets than a stretch of one row —
-    /// and `out` is in the order of `dirs`.
+    /// `row_len` rays each (row-major, e.g. [`Scene::TILE_ROWS`] rows of a camera's pixels).
+    /// The rays are traced in tiles of four columns by `TILE_ROWS` rows — more compact packets
+    /// than a stretch of one row — and `out` is in the order of `dirs`.
     ///
     /// # Panics
     /// When `out.len() != dirs.len()`, or `row_len` is 0 or does not divide `dirs.len()`.
@@ -233,8 +238,8 @@ impl Scene {
                 out[i] = hit;
             }
         };
-        for y0 in (0..rows).step_by(2) {
-            let y1 = (y0 + 2).min(rows);
+        for y0 in (0..rows).step_by(Self::TILE_ROWS) {
+            let y1 = (y0 + Self::TILE_ROWS).min(rows);
             for x0 in (0..row_len).step_by(4) {
                 let x1 = (x0 + 4).min(row_len);
                 for y in y0..y1 {

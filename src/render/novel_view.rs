@@ -178,14 +178,14 @@ pub fn render_view_with(
     let mut mask = vec![false; w * h];
     frame
         .rgb
-        .par_chunks_mut(3 * w * 2)
-        .zip(mask.par_chunks_mut(w * 2))
+        .par_chunks_mut(3 * w * Scene::TILE_ROWS)
+        .zip(mask.par_chunks_mut(w * Scene::TILE_ROWS))
         .enumerate()
         .for_each_init(
             || (Vec::new(), Vec::new()),
             |(dirs, hits), (c, (rows, mrows))| {
-                // Trace two rows' rays together (packets of neighbouring rays), then shade.
-                let (y0, ny) = (2 * c, mrows.len() / w);
+                // Trace a band of rows together (packets of neighbouring rays), then shade.
+                let (y0, ny) = (Scene::TILE_ROWS * c, mrows.len() / w);
                 let row_dirs = &rays.dirs[y0 * w * ss..(y0 + ny) * w * ss];
                 dirs.clear();
                 dirs.extend(row_dirs.iter().map(|d| -> [f32; 3] {
