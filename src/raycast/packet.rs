@@ -13,10 +13,13 @@
 //! ray, the same arithmetic as the single-ray box test), then the watertight triangle test for
 //! each ray that enters it before its current nearest hit (with AVX2, eight rays against one
 //! triangle per step when they share their axis permutation, bit-identical to the single-ray
-//! test). Sixteen rays per packet (4x4 pixels) measured about 13% faster than eight (4x2) on
-//! the phantom camera benchmark. Every ray therefore tests a
-//! superset of the leaves single-ray traversal tests and gets the same nearest hit (the same
-//! triangle unless two triangles tie at exactly the same distance).
+//! test). Every ray therefore tests a superset of the leaves single-ray traversal tests and gets
+//! the same nearest hit (the same triangle unless two triangles tie at exactly the same
+//! distance).
+//!
+//! Packet size, measured on the phantom camera benchmark (1 thread, per CPU-second): sixteen
+//! rays (4x4 pixels) were about 13% faster than eight (4x2 pixels; 4x2 was itself about 8%
+//! faster than 8x1), and thirty-two (4x8) no faster than sixteen.
 
 use super::bvh::{leaf_blocks, Bvh, Node, RawHit, EMPTY, FAR_SCALE, LEAF, STACK};
 use super::triangle::{edges_f64, intersect4, ShearedRay, Tri4};
@@ -516,7 +519,7 @@ impl<const W: usize> Bvh<W> {
                 continue;
             }
             let p = Packet::new(org, d);
-            let valid = (1u32 << d.len()) - 1;
+            let valid = u32::MAX >> (32 - d.len());
             let h = self.closest_packet(ops, &p, valid, tmax);
             o.copy_from_slice(&h[..d.len()]);
         }
