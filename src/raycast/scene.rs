@@ -159,7 +159,7 @@ impl Scene {
     }
 
     /// [`Scene::closest_hit`] for rays that share one origin (a camera's pixels), on the calling
-    /// thread: consecutive groups of [`PACKET`] (16) rays are traced together as one packet, which is
+    /// thread: consecutive groups of 16 rays are traced together as one packet, which is
     /// fastest when they are coherent (neighbouring pixels). Each `out[i]` gets the nearest hit
     /// along `dirs[i]` with `0 < t < tmax` — the same as `closest_hit(origin, dirs[i], tmax)`
     /// (the same triangle unless two tie at exactly the same `t`).

@@ -16,7 +16,7 @@ pub struct ShearedRay {
     pub org: [f32; 3],
     /// Index of the dominant direction axis, and the two others (kx, ky, kz).
     pub k: [usize; 3],
-    /// Shear constants Sx = d[kx]/d[kz], Sy = d[ky]/d[kz], Sz = 1/d[kz].
+    /// Shear constants `Sx = d[kx] / d[kz]`, `Sy = d[ky] / d[kz]`, `Sz = 1 / d[kz]`.
     pub s: [f32; 3],
 }
 
