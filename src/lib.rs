@@ -10,6 +10,7 @@ pub mod inspect;
 pub mod io;
 pub mod math;
 pub mod mesh;
+pub mod model;
 pub mod phantom;
 pub mod raycast;
 pub mod render;

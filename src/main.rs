@@ -4,11 +4,15 @@ use anyhow::Context;
 use bronchosim::inspect::{inspect_case, InspectOptions};
 use bronchosim::math::Point3;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
-use bronchosim::workflow::build::{build_model, BuildOptions};
+use bronchosim::render::{RenderOptions, ShadingMode};
+use bronchosim::workflow::build::{build_model, BuildOptions, ShadingChoice};
 use bronchosim::workflow::demo::run_demo;
+use bronchosim::workflow::flythrough::{flythrough, FlythroughOptions};
+use bronchosim::workflow::render::{render_command, RenderCommandOptions};
 use bronchosim::workflow::segment::{
     default_segment_out, parse_point, segment_command, SegmentCommandOptions,
 };
+use bronchosim::workflow::truth_eval::evaluate_with_baselines;
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -89,6 +93,18 @@ enum Command {
         /// weights) or "average" (predicted-intensity-weighted average).
         #[arg(long, default_value = "max")]
         fusion: String,
+        /// Shading model of the texture and of new views: "paper" (per-viewpoint Psi),
+        /// "calibrated" (one light for the whole video) or "auto" (the one that predicts
+        /// held-out frames better).
+        #[arg(long, default_value = "auto")]
+        shading: String,
+        /// Hold out every N-th frame to cross-validate both shading models (0: skip).
+        #[arg(long, default_value_t = 5)]
+        cross_validate_every: usize,
+        /// Reference views (views.json, camera.json, images; e.g. the phantom's truth/): the
+        /// report then scores new views against them next to two baselines.
+        #[arg(long)]
+        truth: Option<PathBuf>,
         /// Replace an existing model folder.
         #[arg(long)]
         force: bool,
@@ -133,6 +149,53 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+    /// Render new views of a built model (paper Fig. 4) from the poses of a views.json.
+    Render {
+        /// The model folder (from `build`).
+        model: PathBuf,
+        /// Poses of the new views, in the poses.json schema; each "image" names the output PNG
+        /// inside --out.
+        #[arg(long)]
+        views: PathBuf,
+        /// Camera of the new views (camera.json or OpenCV YAML/XML); default: the training camera.
+        #[arg(long)]
+        camera: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Shading of a new view: "nearest" (the paper: Psi of the nearest fitted viewpoint) or
+        /// "blend" (the k nearest viewpoints' Psi blended continuously).
+        #[arg(long, default_value = "blend")]
+        shading: String,
+        /// Viewpoints blended by --shading blend.
+        #[arg(long, default_value_t = 4)]
+        k: usize,
+        /// Rays per pixel along each axis (antialiasing).
+        #[arg(long, default_value_t = 1)]
+        supersample: u32,
+        /// Replace an existing output folder.
+        #[arg(long)]
+        force: bool,
+    },
+    /// Fly along the airway's centre line through the textured region (first to last training
+    /// camera): DIR/frame_0000.png …, DIR/path.json (views for `render`) and, with ffmpeg,
+    /// DIR/flythrough.mp4.
+    Flythrough {
+        /// The model folder (from `bronchosim build`).
+        model: PathBuf,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Number of frames.
+        #[arg(long, default_value_t = 120)]
+        frames: usize,
+        /// Frame rate of the video (frames per second).
+        #[arg(long, default_value_t = 25)]
+        fps: u32,
+        /// Replace the output folder if it exists.
+        #[arg(long)]
+        force: bool,
+    },
     /// Score rendered views against reference images: PSNR and SSIM on the pixels both cover,
     /// after one least-squares gain per channel over all views.
     Evaluate {
@@ -142,10 +205,14 @@ enum Command {
         /// Truth folder: views.json, the reference images it names, optional `<stem>_mask.png`.
         #[arg(long)]
         truth: PathBuf,
-        /// Also score the baselines (nearest training frame reprojected; flat albedo with
-        /// cos(gamma)/z^2 shading) on the same pixels. Needs the model folder.
-        #[arg(long)]
-        baselines: bool,
+        /// Also render and score, from this model folder, the paper's method (nearest and
+        /// k-nearest Psi) and the two baselines ((a) nearest training frame reprojected,
+        /// (b) flat albedo with cos(gamma)/z^2 shading) on the same pixels.
+        #[arg(long, value_name = "MODEL")]
+        baselines: Option<PathBuf>,
+        /// The case the model was built from (default: the one model.json names).
+        #[arg(long, requires = "baselines")]
+        case: Option<PathBuf>,
         /// Print the scores as JSON.
         #[arg(long)]
         json: bool,
@@ -194,6 +261,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     m.mean_r2,
                     d.model.join("report.html").display()
                 );
+                println!(
+                    "truth views rendered into {}; scores (PSNR dB / SSIM, same pixels, per-channel gain):\n{}",
+                    d.views.display(),
+                    bronchosim::render::evaluate::scores_text(&d.scores)
+                );
             }
             Ok(())
         }
@@ -202,10 +274,21 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             out,
             texel_mm,
             fusion,
+            shading,
+            cross_validate_every,
+            truth,
             force,
         } => {
             let mut opts = BuildOptions {
                 force,
+                truth,
+                cross_validate_every,
+                shading: match shading.as_str() {
+                    "auto" => ShadingChoice::Auto,
+                    "paper" => ShadingChoice::Paper,
+                    "calibrated" => ShadingChoice::Calibrated,
+                    other => anyhow::bail!("--shading {other}: expected auto, paper or calibrated"),
+                },
                 quiet: cli.quiet,
                 ..Default::default()
             };
@@ -221,7 +304,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .with_context(|| format!("build {}", case.display()))?;
             if !cli.quiet {
                 println!(
-                    "built {} from {} frames in {:.1} s: {} triangles, atlas {}x{} ({} of {} texels seen), mean R² of Psi {:.3}",
+                    "built {} from {} frames in {:.1} s: {} triangles, atlas {}x{} ({} of {} texels seen), mean R² of Psi {:.3}, shading {}",
                     out.display(),
                     m.counts.frames,
                     m.timings.total,
@@ -230,8 +313,24 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     m.counts.atlas_size[1],
                     m.counts.covered_texels,
                     m.counts.chart_texels,
-                    m.mean_r2
+                    m.mean_r2,
+                    m.shading_model
                 );
+                if let Some(cv) = &m.cross_validation {
+                    for mc in &cv.models {
+                        println!(
+                            "  held-out frames ({} of {}): {} predicts them at {:.2} dB PSNR, SSIM {:.4}",
+                            cv.held_out.len(),
+                            m.counts.frames,
+                            mc.model,
+                            mc.mean_psnr_db.unwrap_or(f64::NAN),
+                            mc.mean_ssim.unwrap_or(f64::NAN)
+                        );
+                    }
+                }
+                for w in &m.warnings {
+                    eprintln!("warning: {w}");
+                }
             }
             Ok(())
         }
@@ -330,21 +429,87 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        Command::Render {
+            model,
+            views,
+            camera,
+            out,
+            shading,
+            k,
+            supersample,
+            force,
+        } => {
+            let shading = match shading.as_str() {
+                "nearest" => ShadingMode::Nearest,
+                "blend" => ShadingMode::KNearest { k: k.max(1) },
+                other => anyhow::bail!("--shading {other}: expected nearest or blend"),
+            };
+            let opts = RenderCommandOptions {
+                camera,
+                render: RenderOptions {
+                    shading,
+                    supersample: supersample.max(1),
+                    ..Default::default()
+                },
+                force,
+            };
+            let s = render_command(&model, &views, &out, &opts)
+                .with_context(|| format!("render {}", model.display()))?;
+            if !cli.quiet {
+                println!(
+                    "rendered {} views into {} in {:.2} s ({:.1} views/s; shading {}; model loaded in {:.2} s)",
+                    s.images.len(),
+                    out.display(),
+                    s.render_seconds,
+                    s.images.len() as f64 / s.render_seconds.max(1e-9),
+                    s.shading,
+                    s.load_seconds
+                );
+            }
+            Ok(())
+        }
+        Command::Flythrough {
+            model,
+            out,
+            frames,
+            fps,
+            force,
+        } => {
+            let opts = FlythroughOptions {
+                frames,
+                fps,
+                force,
+                quiet: cli.quiet,
+                ..Default::default()
+            };
+            let s = flythrough(&model, &out, &opts)
+                .with_context(|| format!("flythrough {}", model.display()))?;
+            if !cli.quiet {
+                println!(
+                    "{}: {} frames along {:.1} mm (clearance >= {:.1} mm) in {:.1} s ({:.1} frames/s); {}",
+                    s.out.display(),
+                    s.frames,
+                    s.path_length_mm,
+                    s.min_clearance_mm,
+                    s.render_seconds,
+                    s.frames as f64 / s.render_seconds.max(1e-9),
+                    s.video_note
+                );
+            }
+            Ok(())
+        }
         Command::Evaluate {
             rendered,
             truth,
             baselines,
+            case,
             json,
         } => {
-            if baselines {
-                // The baselines are library functions (render::baselines); producing their
-                // frames needs the model folder and the case, wired with `build`.
-                anyhow::bail!(
-                    "evaluate --baselines: not available yet (needs the model folder written by build)"
-                );
+            let scores = match &baselines {
+                Some(model) => evaluate_with_baselines(&rendered, &truth, model, case.as_deref()),
+                None => bronchosim::render::evaluate_folders(&rendered, &truth, Vec::new()),
             }
-            let scores = bronchosim::render::evaluate_folders(&rendered, &truth, Vec::new())
-                .with_context(|| format!("evaluate {}", rendered.display()))?;
+            .with_context(|| format!("evaluate {}", rendered.display()))?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&scores)?);
             } else {

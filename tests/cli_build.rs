@@ -39,7 +39,7 @@ fn phantom_then_build_writes_the_model_folder() {
     }
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(model.join("model.json")).unwrap()).unwrap();
-    assert_eq!(m["format_version"], 1);
+    assert_eq!(m["format_version"], 2);
     assert_eq!(m["counts"]["frames"], 8);
     let covered = m["counts"]["covered_texels"].as_u64().unwrap();
     let chart = m["counts"]["chart_texels"].as_u64().unwrap();

@@ -12,7 +12,7 @@ use bronchosim::io::frames::Frame;
 use bronchosim::math::{Affine, Point3};
 use bronchosim::mesh::TriMesh;
 use bronchosim::raycast::{cast_frame, Scene};
-use bronchosim::shading::{ExclusionCounts, PsiModel};
+use bronchosim::shading::{ExclusionCounts, FrameShading, PsiModel};
 use bronchosim::texture::atlas::{build_atlas, rasterize_texels, AtlasOptions};
 use bronchosim::texture::{
     delight_frame, fuse, write_texture_outputs, DelightOptions, FusedTexture, FusionMethod,
@@ -330,7 +330,7 @@ fn occluded_texels_take_nothing_from_the_frame() {
         frame: &frame,
         camera: &camera,
         camera_to_world: &pose,
-        psi: &psi,
+        shading: FrameShading::Paper(&psi),
         depth: &g.z,
     }];
     let f = fuse(&texels, obs.as_mut_slice(), &FusionOptions::default()).expect("fuse");

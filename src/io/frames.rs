@@ -211,8 +211,18 @@ pub fn linear_to_srgb16(linear: f32) -> u16 {
 /// Grey is copied to R = G = B; alpha is dropped. The samples are taken as sRGB-encoded.
 pub fn read_png(path: &Path) -> Result<Frame> {
     let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    decode_png(BufReader::new(file), path)
+}
+
+/// [`read_png`] of PNG file contents held in memory (e.g. a texture embedded in a GLB);
+/// `name` is the file errors name.
+pub fn decode_png_bytes(bytes: &[u8], name: &Path) -> Result<Frame> {
+    decode_png(std::io::Cursor::new(bytes), name)
+}
+
+fn decode_png<R: std::io::BufRead + std::io::Seek>(input: R, path: &Path) -> Result<Frame> {
     let bad = |e: png::DecodingError| Error::invalid(path, format!("not a readable PNG: {e}"));
-    let mut decoder = png::Decoder::new(BufReader::new(file));
+    let mut decoder = png::Decoder::new(input);
     // Palettes, low bit depths and tRNS become plain 8/16-bit grey/RGB(A) samples.
     decoder.set_transformations(png::Transformations::EXPAND);
     let mut reader = decoder.read_info().map_err(bad)?;

@@ -212,7 +212,8 @@ pub fn write_obj(path: &Path, mesh: &TriMesh, uvs: Option<&[[f32; 2]]>) -> Resul
 /// TEXCOORD_0 (u right, v down, as glTF defines) with the PNG embedded as the base colour.
 pub fn write_glb(path: &Path, mesh: &TriMesh, texture: Option<(&[[f32; 2]], &[u8])>) -> Result<()> {
     check_mesh(path, mesh, texture.map(|t| t.0))?;
-    let normals = mesh.vertex_normals();
+    // Smooth across the atlas's chart seams (split vertices share their position).
+    let normals = mesh.seamless_vertex_normals();
     let n = mesh.positions.len();
     let mut bin: Vec<u8> = Vec::new();
     let mut root = json::Root {

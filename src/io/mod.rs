@@ -7,6 +7,7 @@ pub mod ct;
 pub mod dicom;
 pub mod frame_source;
 pub mod frames;
+pub mod glb_import;
 pub mod mesh_export;
 pub mod nifti;
 pub mod output_dir;

@@ -42,6 +42,47 @@ impl TriMesh {
         n
     }
 
+    /// The mesh with vertices at bit-identical positions merged (a texture atlas splits
+    /// vertices along chart seams; merging them back gives normals that are smooth across the
+    /// seams). Returns the merged mesh and, for every vertex of `self`, its merged index.
+    /// Triangle order is kept.
+    pub fn welded(&self) -> (TriMesh, Vec<u32>) {
+        let mut first: std::collections::HashMap<[u32; 3], u32> =
+            std::collections::HashMap::with_capacity(self.positions.len());
+        let mut positions = Vec::new();
+        let map: Vec<u32> = self
+            .positions
+            .iter()
+            .map(|p| {
+                let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+                *first.entry(key).or_insert_with(|| {
+                    positions.push(*p);
+                    (positions.len() - 1) as u32
+                })
+            })
+            .collect();
+        let triangles = self
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| map[v as usize]))
+            .collect();
+        (
+            TriMesh {
+                positions,
+                triangles,
+            },
+            map,
+        )
+    }
+
+    /// Area-weighted unit vertex normals that ignore seams: vertices at the same position get
+    /// the same normal (see [`TriMesh::welded`]).
+    pub fn seamless_vertex_normals(&self) -> Vec<Vector3<f32>> {
+        let (welded, map) = self.welded();
+        let n = welded.vertex_normals();
+        map.iter().map(|&v| n[v as usize]).collect()
+    }
+
     /// Total surface area (mm²).
     pub fn area(&self) -> f64 {
         (0..self.triangles.len())

@@ -12,11 +12,10 @@
 //! `length / (dt + 0.5)²` gives the path that hugs the centre of the lumen.
 
 use crate::math::Point3;
+use crate::volume::geodesic::{centred_path, dijkstra, inside_distance, neighbours, step};
 use crate::volume::morphology::{component_of, distance_transform_sq};
 use crate::volume::Volume;
 use crate::{Error, Result};
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
 
 /// The centreline through a mask and the signed distance it was found with.
 #[derive(Clone, Debug)]
@@ -30,93 +29,12 @@ pub struct MaskCentreline {
     pub split_depths_mm: Vec<f64>,
 }
 
-/// 26-neighbour offsets and their lengths (mm).
-fn neighbours(sp: [f64; 3]) -> Vec<([i64; 3], f32)> {
-    let mut v = Vec::new();
-    for dz in -1i64..=1 {
-        for dy in -1i64..=1 {
-            for dx in -1i64..=1 {
-                if (dx, dy, dz) != (0, 0, 0) {
-                    let l = ((dx as f64 * sp[0]).powi(2)
-                        + (dy as f64 * sp[1]).powi(2)
-                        + (dz as f64 * sp[2]).powi(2))
-                    .sqrt();
-                    v.push(([dx, dy, dz], l as f32));
-                }
-            }
-        }
-    }
-    v
-}
-
-#[inline]
-fn step(dims: [usize; 3], i: usize, o: &[i64; 3]) -> Option<usize> {
-    let (x, y, z) = (
-        (i % dims[0]) as i64 + o[0],
-        ((i / dims[0]) % dims[1]) as i64 + o[1],
-        (i / (dims[0] * dims[1])) as i64 + o[2],
-    );
-    if x < 0 || y < 0 || z < 0 || x >= dims[0] as i64 || y >= dims[1] as i64 || z >= dims[2] as i64
-    {
-        return None;
-    }
-    Some(x as usize + dims[0] * (y as usize + dims[1] * z as usize))
-}
-
-/// Dijkstra over mask voxels from `start`; `cost(a, b, len)` is the edge weight. Returns the
-/// distances, predecessors and the settle order; stops early when `stop` is settled.
-fn dijkstra(
-    mask: &[u8],
-    dims: [usize; 3],
-    nb: &[([i64; 3], f32)],
-    start: usize,
-    stop: Option<usize>,
-    cost: impl Fn(usize, usize, f32) -> f32,
-) -> (Vec<f32>, Vec<u32>, Vec<u32>) {
-    let n = mask.len();
-    let mut dist = vec![f32::INFINITY; n];
-    let mut pred = vec![u32::MAX; n];
-    let mut order = Vec::new();
-    let mut heap = BinaryHeap::new();
-    dist[start] = 0.0;
-    heap.push(Reverse((0u32, start as u32)));
-    while let Some(Reverse((dbits, v))) = heap.pop() {
-        let v = v as usize;
-        let d = f32::from_bits(dbits);
-        if d > dist[v] {
-            continue;
-        }
-        order.push(v as u32);
-        if Some(v) == stop {
-            break;
-        }
-        for (o, len) in nb {
-            if let Some(u) = step(dims, v, o) {
-                if mask[u] == 0 {
-                    continue;
-                }
-                let nd = d + cost(v, u, *len);
-                if nd < dist[u] {
-                    dist[u] = nd;
-                    pred[u] = v as u32;
-                    // Non-negative f32 bits order like the floats themselves.
-                    heap.push(Reverse((nd.to_bits(), u as u32)));
-                }
-            }
-        }
-    }
-    (dist, pred, order)
-}
-
 /// Find the camera centreline through `mask` (nonzero = lumen); see the module docs.
 pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
     let dims = mask.dims;
     let sp = mask.spacing();
     let n = mask.len();
-    let dt_in: Vec<f32> = distance_transform_sq(dims, sp, |i| mask.data[i] == 0)
-        .into_iter()
-        .map(f32::sqrt)
-        .collect();
+    let dt_in = inside_distance(mask);
     let (thick, &best) = dt_in
         .iter()
         .enumerate()
@@ -173,7 +91,8 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
         .max_by(|&&x, &&y| dt_in[x].total_cmp(&dt_in[y]).then(y.cmp(&x)))
         .expect("the component is not empty");
     let nb = neighbours(sp);
-    let (geo, pred, order) = dijkstra(&comp.data, dims, &nb, start, None, |_, _, l| l);
+    let tree = dijkstra(&comp.data, dims, &nb, start, None, |_, _, l| l);
+    let (geo, pred, order) = (&tree.dist, &tree.pred, &tree.order);
 
     // Sweep geodesic shells; label 1 = still followed, 2 = dropped.
     let shell = (2.0f64).max(2.5 * sp[0].max(sp[1]).max(sp[2])) as f32;
@@ -252,22 +171,8 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
         .or_else(|| best_of(&last_active, &dt_in))
         .ok_or_else(|| Error::Other("mask centreline: no target voxel".into()))?;
     // Centred path: cost length / (dt + 0.5)², averaged over the edge's two voxels.
-    let (_, pred2, _) = dijkstra(&comp.data, dims, &nb, start, Some(target), |a, b, l| {
-        let d = 0.5 * (dt_in[a] + dt_in[b]) + 0.5;
-        l / (d * d)
-    });
-    let mut chain = vec![target];
-    let mut v = target;
-    while v != start {
-        v = pred2[v] as usize;
-        if v == u32::MAX as usize || chain.len() > n {
-            return Err(Error::Other(
-                "mask centreline: broken predecessor chain".into(),
-            ));
-        }
-        chain.push(v);
-    }
-    chain.reverse();
+    let chain = centred_path(&comp, &dt_in, start, target)
+        .map_err(|e| Error::Other(format!("mask centreline: {e}")))?;
     // The first 15 mm are dropped: segmentations often taper at the cut top of the trachea.
     let pts: Vec<Point3<f64>> = chain.into_iter().map(world).collect();
     let mut arc = 0.0;

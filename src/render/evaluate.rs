@@ -67,15 +67,24 @@ pub struct MethodScore {
     pub mean_ssim: f64,
 }
 
+/// Linear value at or above which an image channel counts as clipped (8-bit white is 1.0).
+pub const CLIPPED: f32 = 0.999;
+
 /// Least-squares gain per channel mapping `rendered` onto `truth` over the covered pixels of
-/// all views (`masks[v][i]`); 1 for a channel that is zero everywhere.
+/// all views (`masks[v][i]`); 1 for a channel that is zero everywhere. A pixel whose channel
+/// is clipped ([`CLIPPED`]) in either image says nothing about the gain and is left out of that
+/// channel's fit (a reference view saturates near the wall; a rendered PNG clips at white).
 pub fn fit_gains(rendered: &[&Frame], truth: &[&Frame], masks: &[Vec<bool>]) -> [f64; 3] {
     let (mut rt, mut rr) = ([0.0f64; 3], [0.0f64; 3]);
     for ((r, t), m) in rendered.iter().zip(truth).zip(masks) {
         for (i, &covered) in m.iter().enumerate() {
             if covered {
                 for k in 0..3 {
-                    let (a, b) = (r.rgb[3 * i + k] as f64, t.rgb[3 * i + k] as f64);
+                    let (a, b) = (r.rgb[3 * i + k], t.rgb[3 * i + k]);
+                    if a >= CLIPPED || b >= CLIPPED {
+                        continue;
+                    }
+                    let (a, b) = (a as f64, b as f64);
                     rt[k] += a * b;
                     rr[k] += a * a;
                 }

@@ -17,6 +17,6 @@ pub use evaluate::{evaluate_methods, fit_gains, MaskedImage, MethodScore, ViewSc
 pub use novel_view::{
     render_view, render_view_with, triangle_uvs, RenderInputs, RenderOptions, ViewRays,
 };
-pub use shading_lookup::{BlendedPsi, ShadingMode, ViewpointIndex};
+pub use shading_lookup::{BlendedPsi, ShadingMode, ViewShader, ViewpointIndex};
 pub use texture_sampler::{MipOptions, MipTexture};
 pub use views_io::{evaluate_folders, read_views, render_views, View};

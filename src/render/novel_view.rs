@@ -3,13 +3,14 @@
 
 use rayon::prelude::*;
 
-use super::shading_lookup::{BlendedPsi, ShadingMode, ViewpointIndex};
+use super::shading_lookup::{ShadingMode, ViewShader, ViewpointIndex};
 use super::texture_sampler::MipTexture;
 use crate::camera::Camera;
 use crate::io::frames::Frame;
 use crate::math::Affine;
 use crate::raycast::Scene;
 use crate::shading::psi::PsiModel;
+use crate::shading::CalibratedModel;
 use crate::texture::atlas::Atlas;
 use crate::{Error, Result};
 
@@ -28,6 +29,8 @@ pub struct RenderInputs<'a> {
     pub psi: &'a [PsiModel],
     /// Centres and directions of `psi` (build once with [`ViewpointIndex::new`]).
     pub index: &'a ViewpointIndex,
+    /// The calibrated light model; when given it shades the view instead of `psi`.
+    pub calibrated: Option<&'a CalibratedModel>,
 }
 
 /// UV corners of every triangle of an atlas (input to [`RenderInputs::tri_uv`]).
@@ -164,7 +167,13 @@ pub fn render_view_with(
             inputs.index.len()
         )));
     }
-    let shade = BlendedPsi::new(inputs.psi, inputs.index, camera_to_world, opts.shading);
+    let shade = ViewShader::new(
+        inputs.psi,
+        inputs.index,
+        inputs.calibrated,
+        camera_to_world,
+        opts.shading,
+    );
     let m = camera_to_world;
     let org = [m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32];
     let rot: [[f32; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)] as f32));
@@ -200,9 +209,11 @@ pub fn render_view_with(
                     let p = y0 * w + i;
                     let mut acc = [0.0f32; 3];
                     let mut n_hit = 0u32;
-                    for (dir, hit) in dirs[i * ss..(i + 1) * ss]
+                    let cam_dirs = &row_dirs[i * ss..(i + 1) * ss];
+                    for ((dir, hit), d) in dirs[i * ss..(i + 1) * ss]
                         .iter()
                         .zip(&hits[i * ss..(i + 1) * ss])
+                        .zip(cam_dirs)
                     {
                         let Some(hit) = hit else {
                             continue;
@@ -223,9 +234,9 @@ pub fn render_view_with(
                         } else {
                             tex.sample_bilinear(u, v)
                         };
-                        let psi = shade.eval_rgb(gamma, z);
+                        let (scale, offset) = shade.eval_rgb(gamma, z, d[2]);
                         for k in 0..3 {
-                            acc[k] += psi[k] * albedo[k];
+                            acc[k] += scale[k] * albedo[k] + offset[k];
                         }
                         n_hit += 1;
                     }

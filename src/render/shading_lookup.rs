@@ -10,6 +10,7 @@
 use crate::io::poses::{camera_centre, viewing_direction};
 use crate::math::{Affine, Point3, Vector3};
 use crate::shading::psi::PsiModel;
+use crate::shading::CalibratedModel;
 
 /// How the fitted Psi models are chosen for a new view.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -185,6 +186,55 @@ impl<'a> BlendedPsi<'a> {
             }
         }
         out
+    }
+}
+
+/// The shading of a new view: the paper's (blended) per-viewpoint Psi, or the calibrated light
+/// of the whole video, which moves with the new camera (`rho(gamma) s(theta) / z²` at the
+/// reference gain, plus the median inter-reflection term when fitted).
+#[derive(Clone, Debug)]
+pub enum ViewShader<'a> {
+    /// Psi of the nearest (or k nearest) fitted viewpoints.
+    Paper(BlendedPsi<'a>),
+    /// The calibrated light model.
+    Calibrated {
+        /// The model.
+        model: &'a CalibratedModel,
+        /// Its ambient term for new views (per channel, linear intensity).
+        ambient: [f32; 3],
+    },
+}
+
+impl<'a> ViewShader<'a> {
+    /// The shader of a new camera: calibrated when `calibrated` is given, else Psi chosen by
+    /// `mode`.
+    pub fn new(
+        psi: &'a [PsiModel],
+        index: &ViewpointIndex,
+        calibrated: Option<&'a CalibratedModel>,
+        camera_to_world: &Affine,
+        mode: ShadingMode,
+    ) -> ViewShader<'a> {
+        match calibrated {
+            Some(model) => ViewShader::Calibrated {
+                model,
+                ambient: model.new_view_ambient().map(|a| a as f32),
+            },
+            None => ViewShader::Paper(BlendedPsi::new(psi, index, camera_to_world, mode)),
+        }
+    }
+
+    /// Intensity of unit albedo seen at `gamma`, distance `z` (mm), along a ray `cos_theta` off
+    /// the optical axis: (scale, offset) per channel, pixel = albedo · scale + offset.
+    #[inline]
+    pub fn eval_rgb(&self, gamma: f32, z: f32, cos_theta: f32) -> ([f32; 3], [f32; 3]) {
+        match self {
+            ViewShader::Paper(b) => (b.eval_rgb(gamma, z), [0.0; 3]),
+            ViewShader::Calibrated { model, ambient } => {
+                let s = model.eval_rgb(gamma as f64, cos_theta as f64, z as f64, 1.0);
+                (s.map(|v| v as f32), *ambient)
+            }
+        }
     }
 }
 

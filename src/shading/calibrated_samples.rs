@@ -90,6 +90,38 @@ impl PooledSamples {
         self.frame_start.len().saturating_sub(1)
     }
 
+    /// Append the samples of `other` (pooled from later frames) as the next frames: a video
+    /// is pooled one frame at a time without keeping its frames. Both must agree on texel ids.
+    pub fn append(&mut self, other: PooledSamples) -> Result<()> {
+        if self.frame_start.is_empty() {
+            self.frame_start.push(0);
+        }
+        if self.texel.is_some() != other.texel.is_some() && !self.is_empty() {
+            return Err(Error::Other(
+                "calibrated samples: appending frames with and without texel ids".into(),
+            ));
+        }
+        let base = self.frames() as u32;
+        let offset = self.len();
+        self.gamma.extend_from_slice(&other.gamma);
+        self.cos_theta.extend_from_slice(&other.cos_theta);
+        self.z.extend_from_slice(&other.z);
+        self.frame.extend(other.frame.iter().map(|f| f + base));
+        self.pixel.extend_from_slice(&other.pixel);
+        for ch in 0..3 {
+            self.rgb[ch].extend_from_slice(&other.rgb[ch]);
+        }
+        match (self.texel.as_mut(), other.texel) {
+            (Some(t), Some(o)) => t.extend(o),
+            (None, Some(o)) => self.texel = Some(o),
+            _ => {}
+        }
+        self.frame_start
+            .extend(other.frame_start.iter().skip(1).map(|s| s + offset));
+        self.excluded.extend(other.excluded);
+        Ok(())
+    }
+
     /// Smallest cos theta among the samples (the fit's angular edge).
     pub fn min_cos_theta(&self) -> f64 {
         self.cos_theta
@@ -309,6 +341,33 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("frame 1"));
+    }
+
+    #[test]
+    fn appending_one_frame_at_a_time_equals_pooling_together() {
+        let n = 400;
+        let gamma: Vec<f32> = (0..n).map(|i| 0.2 + (i % 7) as f32 * 0.1).collect();
+        let z: Vec<f32> = (0..n).map(|i| 5.0 + (i % 13) as f32).collect();
+        let ct = vec![0.95f32; n];
+        let rgb: Vec<f32> = (0..3 * n).map(|k| 0.1 + (k % 5) as f32 * 0.1).collect();
+        let fr = FrameData {
+            gamma: &gamma,
+            z: &z,
+            cos_theta: &ct,
+            rgb: &rgb,
+            texel: None,
+        };
+        let opts = PoolOptions::default();
+        let together = pool_frames(&[fr, fr, fr], &opts).unwrap();
+        let mut appended = PooledSamples::default();
+        for _ in 0..3 {
+            appended.append(pool_frames(&[fr], &opts).unwrap()).unwrap();
+        }
+        assert_eq!(appended.frames(), 3);
+        assert_eq!(appended.frame_start, together.frame_start);
+        assert_eq!(appended.frame, together.frame);
+        assert_eq!(appended.z, together.z);
+        assert_eq!(appended.excluded.len(), 3);
     }
 
     #[test]

@@ -18,6 +18,7 @@ pub mod calibrated_predict;
 pub mod calibrated_refine;
 pub mod calibrated_samples;
 pub mod fit;
+pub mod frame_shading;
 mod moments;
 pub mod plots;
 pub mod psi;
@@ -34,6 +35,7 @@ pub use calibrated_samples::{
     density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples,
 };
 pub use fit::{fit_psi, ChannelFit, FitOptions, PsiFit, Robust};
+pub use frame_shading::{FrameShading, Shade};
 pub use psi::PsiModel;
 pub use samples::{extract_samples, ExclusionCounts, SampleOptions, SampleSet};
 pub use weights::{density_weights, DensityWeights, WeightOptions};

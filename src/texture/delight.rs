@@ -1,11 +1,13 @@
 //! Texel-centric de-lighting (paper §2.4): every texel is projected into a frame through the
 //! lens model, tested for visibility against the frame's depth buffer, sampled bilinearly and
-//! divided by the frame's `Psi_p(gamma, z)`.
+//! divided by the frame's shading: the paper's `Psi_p(gamma, z)`, or the calibrated light
+//! `g_f rho(gamma) s(theta) / z²` after subtracting its inter-reflection term
+//! ([`FrameShading`]).
 //!
 //! A texel gives no value for a frame when it is behind the camera or outside the image, when
 //! it faces away or is grazing (`gamma < min_gamma`), when any of the four pixels of its
 //! bilinear footprint sees another surface (occlusion) or was excluded from the fit (no hit,
-//! saturated in any channel, all channels under the noise floor), or when Psi is not positive.
+//! saturated in any channel, all channels under the noise floor), or when the shading is not positive.
 
 // `!(x >= t)` on floats is deliberate: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -16,11 +18,9 @@ use super::texels::{BlockSphere, TexelSet, BLOCK};
 use crate::camera::Camera;
 use crate::io::frames::Frame;
 use crate::math::Affine;
-use crate::shading::{PsiModel, SampleOptions};
+use crate::shading::frame_shading::FrameShading;
+use crate::shading::SampleOptions;
 use crate::{Error, Result};
-
-/// Luminance weights (Rec. 709) that turn Psi's RGB prediction into one weight.
-const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
 
 /// One frame as the de-lighting sees it. All borrowed: a caller streaming a video keeps one
 /// frame in memory at a time.
@@ -33,7 +33,7 @@ pub struct Observation<'a> {
     /// Camera → world (rigid, world mm).
     pub camera_to_world: &'a Affine,
     /// The frame's fitted shading model.
-    pub psi: &'a PsiModel,
+    pub shading: FrameShading<'a>,
     /// Euclidean distance camera → surface per pixel (mm), row-major, `+inf` where the pixel
     /// sees nothing: [`crate::raycast::GBuffer::z`] of this frame.
     pub depth: &'a [f32],
@@ -147,20 +147,6 @@ pub(crate) fn max_ray_angle(camera: &Camera) -> f64 {
     best + 0.5 / camera.fx.min(camera.fy).max(1.0)
 }
 
-/// Largest Psi luminance over gamma in [min_gamma, 1] and r in [0, 1] (a 17 x 17 grid).
-fn peak_luminance(psi: &PsiModel, min_gamma: f64) -> f64 {
-    let mut best = 0.0f64;
-    for i in 0..=16 {
-        let gamma = min_gamma + (1.0 - min_gamma) * i as f64 / 16.0;
-        for j in 0..=16 {
-            let z = psi.z_min + (psi.z_max - psi.z_min) * j as f64 / 16.0;
-            let p = psi.eval_rgb(gamma, z);
-            best = best.max(LUMA[0] * p[0] + LUMA[1] * p[1] + LUMA[2] * p[2]);
-        }
-    }
-    best
-}
-
 /// Per-frame constants of the de-lighting.
 pub(crate) struct FrameCtx<'a> {
     rot: [[f64; 3]; 3],
@@ -174,7 +160,7 @@ pub(crate) struct FrameCtx<'a> {
     rgb: &'a [f32],
     depth: &'a [f32],
     depth_max: f64,
-    psi: &'a PsiModel,
+    shading: FrameShading<'a>,
     min_gamma: f64,
     sat: f32,
     floor: f32,
@@ -219,29 +205,26 @@ impl<'a> FrameCtx<'a> {
         if !m.iter().all(|x| x.is_finite()) {
             return bad("the camera pose is not finite".into());
         }
-        let p = obs.psi;
-        if !(p
-            .c
-            .iter()
-            .flatten()
-            .chain(p.d.iter().flatten())
-            .all(|x| x.is_finite())
-            && p.z_min.is_finite()
-            && p.z_max.is_finite())
-        {
-            return bad("the shading model has non-finite coefficients".into());
+        if let Err(m) = obs.shading.validate() {
+            return bad(m);
         }
         // World → camera of a rigid pose: R^T (x - t).
         let rot = [0, 1, 2].map(|i| [0, 1, 2].map(|j| m[(j, i)]));
         let centre = [m[(0, 3)], m[(1, 3)], m[(2, 3)]];
         let trans = [0, 1, 2].map(|i| -(0..3).map(|j| rot[i][j] * centre[j]).sum::<f64>());
-        let depth_max = obs
+        let (depth_min, depth_max) = obs
             .depth
             .iter()
-            .filter(|z| z.is_finite())
-            .fold(0.0f32, |a, &b| a.max(b)) as f64;
+            .filter(|z| z.is_finite() && **z > 0.0)
+            .fold((f32::INFINITY, 0.0f32), |(lo, hi), &z| {
+                (lo.min(z), hi.max(z))
+            });
+        let depth_max = depth_max as f64;
         let min_gamma = (opts.min_gamma as f64).clamp(1e-3, 1.0);
-        let min_weight = opts.min_relative_weight.max(0.0) * peak_luminance(p, min_gamma);
+        let min_weight = opts.min_relative_weight.max(0.0)
+            * obs
+                .shading
+                .peak_luminance(min_gamma, depth_min as f64, depth_max);
         Ok(FrameCtx {
             rot,
             trans,
@@ -254,7 +237,7 @@ impl<'a> FrameCtx<'a> {
             rgb: &obs.frame.rgb,
             depth: obs.depth,
             depth_max,
-            psi: obs.psi,
+            shading: obs.shading,
             min_gamma,
             sat: opts.saturation_level,
             floor: opts.noise_floor,
@@ -298,7 +281,8 @@ impl<'a> FrameCtx<'a> {
         angle - (r / dist).asin() <= self.max_angle
     }
 
-    /// De-light one texel: `(pixel / Psi, Psi luminance)`, or `None` when this frame gives
+    /// De-light one texel: `((pixel - offset) / scale, luminance of scale)` of the frame's
+    /// [`FrameShading`], or `None` when this frame gives
     /// no value for it (see the module documentation).
     #[inline]
     pub(crate) fn texel(&self, p: [f32; 3], n: [f32; 3]) -> Option<([f32; 3], f32)> {
@@ -356,11 +340,12 @@ impl<'a> FrameCtx<'a> {
             }
             px[k] = q;
         }
-        let psi = self.psi.eval_rgb(gamma, d);
+        let shade = self.shading.shade(gamma, d, pc[2] / d);
+        let psi = shade.scale;
         if !psi.iter().all(|&s| s > 1e-9 && s.is_finite()) {
             return None;
         }
-        let weight = LUMA[0] * psi[0] + LUMA[1] * psi[1] + LUMA[2] * psi[2];
+        let weight = shade.luminance();
         if !(weight >= self.min_weight) {
             return None;
         }
@@ -368,7 +353,7 @@ impl<'a> FrameCtx<'a> {
         for ch in 0..3 {
             let top = px[0][ch] + fx * (px[1][ch] - px[0][ch]);
             let bottom = px[2][ch] + fx * (px[3][ch] - px[2][ch]);
-            value[ch] = ((top + fy * (bottom - top)) as f64 / psi[ch]) as f32;
+            value[ch] = (((top + fy * (bottom - top)) as f64 - shade.offset[ch]) / psi[ch]) as f32;
         }
         Some((value, weight as f32))
     }

@@ -1,6 +1,7 @@
 //! Voxel volumes with their index→world affine, and airway segmentation.
 
 pub mod branches;
+pub mod geodesic;
 mod grid;
 pub mod marching_cubes;
 mod mc_tables;

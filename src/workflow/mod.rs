@@ -2,7 +2,13 @@
 //! they chain the stages and write results atomically. `main.rs` only parses and calls these.
 
 pub mod build;
+pub mod build_frames;
+pub mod cross_validate;
 pub mod demo;
+pub mod flythrough;
+pub mod new_views_figure;
 pub mod progress;
+pub mod render;
 pub mod report;
 pub mod segment;
+pub mod truth_eval;

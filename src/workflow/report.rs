@@ -4,11 +4,12 @@
 //! video and per-stage timings.
 
 use crate::io::frames::{write_png_srgb8, Frame};
+use crate::model::ModelManifest;
 use crate::raycast::GBuffer;
 use crate::shading::plots::{plot_psi_slices, plot_samples_density};
 use crate::shading::psi::PsiModel;
 use crate::shading::samples::SampleSet;
-use crate::workflow::build::ModelManifest;
+use crate::workflow::new_views_figure::NewViewsFigure;
 use crate::{Error, Result};
 use base64::Engine;
 use std::fmt::Write as _;
@@ -36,6 +37,8 @@ pub struct ReportInputs<'a> {
     pub frames: &'a [ReportFrame],
     /// albedo.png.
     pub albedo_png: &'a [u8],
+    /// New views (paper Fig. 4), with scores when reference views were given.
+    pub new_views: Option<&'a NewViewsFigure>,
 }
 
 fn img_tag(png: &[u8], alt: &str, width: Option<u32>) -> String {
@@ -139,6 +142,38 @@ fn svg_series(title: &str, series: &[(&str, &str, Vec<f64>)], y_range: (f64, f64
     s
 }
 
+/// Fig. 4: rows of images and, with references, the score table.
+fn new_views_section(html: &mut String, fig: &NewViewsFigure, tmp: &Path) -> Result<()> {
+    let _ = write!(
+        html,
+        "<h2>New views (paper Fig. 4)</h2><p>{}</p>",
+        fig.caption
+    );
+    if !fig.scores.is_empty() {
+        html.push_str("<table><tr><th>method</th><th>mean PSNR (dB)</th><th>mean SSIM</th></tr>");
+        for s in &fig.scores {
+            let _ = write!(
+                html,
+                "<tr><td style=\"text-align:left\">{}</td><td>{:.2}</td><td>{:.4}</td></tr>",
+                s.method, s.mean_psnr_db, s.mean_ssim
+            );
+        }
+        html.push_str("</table>");
+    }
+    for (r, row) in fig.rows.iter().enumerate() {
+        let _ = write!(html, "<h3>{}</h3>", row.name);
+        for (k, (caption, img)) in row.images.iter().enumerate() {
+            let png = png_of(img, tmp, &format!("fig4_{r}_{k}.png"))?;
+            let _ = write!(
+                html,
+                "<figure>{}<figcaption>{caption}</figcaption></figure>",
+                img_tag(&png, caption, Some(200))
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Write report.html.
 pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
     let m = inputs.manifest;
@@ -221,6 +256,9 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
             f.samples.excluded.saturated,
             f.samples.excluded.dark,
         );
+    }
+    if let Some(fig) = inputs.new_views {
+        new_views_section(&mut html, fig, tmp.path())?;
     }
     html.push_str("<h2>Fused albedo atlas</h2>");
     html.push_str(&img_tag(inputs.albedo_png, "albedo atlas", Some(1000)));

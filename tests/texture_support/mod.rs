@@ -17,7 +17,8 @@ use bronchosim::io::frames::{linear_to_srgb8, srgb8_to_linear_lut, Frame};
 use bronchosim::math::{Affine, Vector3};
 use bronchosim::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
 use bronchosim::shading::{
-    density_weights, extract_samples, fit_psi, FitOptions, PsiModel, SampleOptions, WeightOptions,
+    density_weights, extract_samples, fit_psi, FitOptions, FrameShading, PsiModel, SampleOptions,
+    WeightOptions,
 };
 use bronchosim::texture::atlas::{build_atlas, rasterize_texels, Atlas, AtlasOptions};
 use bronchosim::texture::{Observation, TexelSet};
@@ -107,7 +108,7 @@ impl Shot {
             frame: &self.frame,
             camera,
             camera_to_world: &self.pose,
-            psi: &self.psi,
+            shading: FrameShading::Paper(&self.psi),
             depth: &self.gbuffer.z,
         }
     }

@@ -1,0 +1,152 @@
+//! The case's frames as the build's passes see them: decoded one at a time from the frame
+//! source (never all in memory), each with its depth buffer (cached from the fit pass while
+//! the cache fits its memory budget, else ray cast again) and its fitted shading.
+
+use crate::io::case::Case;
+use crate::io::frame_source::FrameSource;
+use crate::io::frames::Frame;
+use crate::raycast::{cast_frame_with, RayTable, Scene};
+use crate::shading::frame_shading::FrameShading;
+use crate::shading::psi::PsiModel;
+use crate::shading::CalibratedModel;
+use crate::texture::delight::Observation;
+use crate::texture::fusion::FrameStream;
+use crate::workflow::progress::Progress;
+use crate::{Error, Result};
+
+/// Depth buffers kept from the fit pass, up to a memory budget.
+pub struct DepthCache {
+    depth: Vec<Option<Vec<f32>>>,
+    budget_bytes: usize,
+    used_bytes: usize,
+}
+
+impl DepthCache {
+    /// A cache for `frames` frames holding at most `budget_bytes` of depth.
+    pub fn new(frames: usize, budget_bytes: usize) -> DepthCache {
+        DepthCache {
+            depth: vec![None; frames],
+            budget_bytes,
+            used_bytes: 0,
+        }
+    }
+
+    /// Keep frame `i`'s depth when it fits the budget.
+    pub fn offer(&mut self, i: usize, depth: &[f32]) {
+        let bytes = std::mem::size_of_val(depth);
+        if i < self.depth.len() && self.used_bytes + bytes <= self.budget_bytes {
+            self.depth[i] = Some(depth.to_vec());
+            self.used_bytes += bytes;
+        }
+    }
+
+    /// Frame `i`'s depth, if kept.
+    pub fn get(&self, i: usize) -> Option<&[f32]> {
+        self.depth.get(i).and_then(|d| d.as_deref())
+    }
+}
+
+/// Which fitted model de-lights the frames.
+#[derive(Clone, Copy, Debug)]
+pub enum FrameShadingSource<'a> {
+    /// Each frame's own Psi (the paper).
+    Paper(&'a [PsiModel]),
+    /// The calibrated light at each frame's gain.
+    Calibrated(&'a CalibratedModel),
+}
+
+impl<'a> FrameShadingSource<'a> {
+    fn of(&self, frame: usize) -> FrameShading<'a> {
+        match *self {
+            FrameShadingSource::Paper(psi) => FrameShading::Paper(&psi[frame]),
+            FrameShadingSource::Calibrated(model) => FrameShading::Calibrated { model, frame },
+        }
+    }
+}
+
+/// The frames of a case (a subset of them, in increasing order) for the fusion passes.
+pub struct CaseFrames<'a> {
+    case: &'a Case,
+    scene: &'a Scene,
+    rays: &'a RayTable,
+    shading: FrameShadingSource<'a>,
+    cache: &'a DepthCache,
+    /// Frame indices (into the case) of the stream's frames, increasing.
+    subset: Vec<usize>,
+    source: Option<FrameSource>,
+    next: usize,
+    frame: Frame,
+    depth: Vec<f32>,
+    /// Advanced once per observation.
+    pub progress: Progress,
+}
+
+impl<'a> CaseFrames<'a> {
+    /// Stream the frames `subset` (case indices, increasing) of `case`.
+    pub fn new(
+        case: &'a Case,
+        scene: &'a Scene,
+        rays: &'a RayTable,
+        shading: FrameShadingSource<'a>,
+        cache: &'a DepthCache,
+        subset: Vec<usize>,
+        progress: Progress,
+    ) -> CaseFrames<'a> {
+        CaseFrames {
+            case,
+            scene,
+            rays,
+            shading,
+            cache,
+            subset,
+            source: None,
+            next: 0,
+            frame: Frame::new(1, 1),
+            depth: Vec::new(),
+            progress,
+        }
+    }
+}
+
+impl FrameStream for CaseFrames<'_> {
+    fn frame_count(&self) -> usize {
+        self.subset.len()
+    }
+
+    fn observation(&mut self, k: usize) -> Result<Observation<'_>> {
+        let index = *self
+            .subset
+            .get(k)
+            .ok_or_else(|| Error::Other(format!("frame {k} of {} asked for", self.subset.len())))?;
+        if self.source.is_none() || index < self.next {
+            self.source = Some(self.case.frame_source()?);
+            self.next = 0;
+        }
+        let src = self.source.as_mut().expect("opened above");
+        while self.next <= index {
+            let f = src.next().ok_or_else(|| {
+                Error::Other(format!("frame {index} missing from the frame source"))
+            })??;
+            if self.next == index {
+                self.frame = f;
+            }
+            self.next += 1;
+        }
+        let pose = &self.case.poses[index].camera_to_world;
+        let depth: &[f32] = match self.cache.get(index) {
+            Some(d) => d,
+            None => {
+                self.depth = cast_frame_with(self.scene, self.rays, pose).z;
+                &self.depth
+            }
+        };
+        self.progress.inc();
+        Ok(Observation {
+            frame: &self.frame,
+            camera: &self.case.camera,
+            camera_to_world: pose,
+            shading: self.shading.of(index),
+            depth,
+        })
+    }
+}
