@@ -66,6 +66,7 @@ fn bench(c: &mut Criterion) {
         texture: &texture,
         psi: &psi,
         index: &index,
+        calibrated: None,
     };
     let camera = Camera {
         width: 320,

@@ -188,6 +188,7 @@ fn render_matches_brute_force_shading_times_albedo() {
         texture: &fx.texture,
         psi: &psi,
         index: &index,
+        calibrated: None,
     };
     // A distorted camera: rendering takes any camera.json.
     let cam = Camera {
@@ -243,6 +244,7 @@ fn mip_mapping_reduces_aliasing_on_distant_grazing_walls() {
         texture: tex,
         psi: &psi,
         index: &index,
+        calibrated: None,
     };
     let cam = camera(96, 60.0);
     let pose = pose_at(0.02, -2.0);
@@ -251,6 +253,7 @@ fn mip_mapping_reduces_aliasing_on_distant_grazing_walls() {
         mipmap,
         supersample,
         gain: 1.0,
+        albedo_only: false,
     };
     let reference = render_view(&inputs(&fx.plain), &cam, &pose, &o(false, 8)).unwrap();
     let no_mip = render_view(&inputs(&fx.plain), &cam, &pose, &o(false, 1)).unwrap();
@@ -285,6 +288,7 @@ fn blending_makes_shading_continuous_while_flying() {
         texture: &fx.texture,
         psi: &psi,
         index: &index,
+        calibrated: None,
     };
     let cam = camera(48, 30.0);
     let mean_brightness = |shading| -> Vec<f64> {

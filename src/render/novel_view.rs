@@ -56,6 +56,8 @@ pub struct RenderOptions {
     pub mipmap: bool,
     /// Exposure: output = gain × Psi × albedo (linear).
     pub gain: f32,
+    /// Write the texture alone (the relative albedo the shading multiplies), unshaded.
+    pub albedo_only: bool,
 }
 
 impl Default for RenderOptions {
@@ -65,6 +67,7 @@ impl Default for RenderOptions {
             supersample: 1,
             mipmap: true,
             gain: 1.0,
+            albedo_only: false,
         }
     }
 }
@@ -146,7 +149,7 @@ pub fn render_view(
 }
 
 /// [`render_view`] with precomputed rays (`opts.supersample` is taken from `rays`). Parallel
-/// over pairs of image rows, traced as packets of neighbouring rays.
+/// over bands of image rows, traced as packets of neighbouring rays.
 pub fn render_view_with(
     inputs: &RenderInputs,
     rays: &ViewRays,
@@ -234,7 +237,11 @@ pub fn render_view_with(
                         } else {
                             tex.sample_bilinear(u, v)
                         };
-                        let (scale, offset) = shade.eval_rgb(gamma, z, d[2]);
+                        let (scale, offset) = if opts.albedo_only {
+                            ([1.0; 3], [0.0; 3])
+                        } else {
+                            shade.eval_rgb(gamma, z, d[2])
+                        };
                         for k in 0..3 {
                             acc[k] += scale[k] * albedo[k] + offset[k];
                         }

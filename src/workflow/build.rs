@@ -433,6 +433,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
             albedo_png: &std::fs::read(out_dir.join("albedo.png"))
                 .map_err(|e| Error::io(out_dir.join("albedo.png"), e))?,
             new_views: Some(&figure),
+            calibrated: shading.calibrated.as_ref(),
         },
     )?;
     manifest.timings.write = t.elapsed().as_secs_f64();

@@ -6,9 +6,11 @@
 use crate::io::frames::{write_png_srgb8, Frame};
 use crate::model::ModelManifest;
 use crate::raycast::GBuffer;
+use crate::shading::calibrated_plots::{plot_gains, plot_light_profile, plot_rho};
 use crate::shading::plots::{plot_psi_slices, plot_samples_density};
 use crate::shading::psi::PsiModel;
 use crate::shading::samples::SampleSet;
+use crate::shading::CalibratedModel;
 use crate::workflow::new_views_figure::NewViewsFigure;
 use crate::{Error, Result};
 use base64::Engine;
@@ -39,6 +41,8 @@ pub struct ReportInputs<'a> {
     pub albedo_png: &'a [u8],
     /// New views (paper Fig. 4), with scores when reference views were given.
     pub new_views: Option<&'a NewViewsFigure>,
+    /// The calibrated light of the whole video, when fitted.
+    pub calibrated: Option<&'a CalibratedModel>,
 }
 
 fn img_tag(png: &[u8], alt: &str, width: Option<u32>) -> String {
@@ -142,6 +146,94 @@ fn svg_series(title: &str, series: &[(&str, &str, Vec<f64>)], y_range: (f64, f64
     s
 }
 
+/// Which shading model the texture and new views use, why (held-out frame prediction of both
+/// models), and the calibrated light: rho(gamma), s(theta), the per-frame gains.
+fn shading_section(
+    html: &mut String,
+    m: &ModelManifest,
+    calibrated: Option<&CalibratedModel>,
+    tmp: &Path,
+) -> Result<()> {
+    let _ = write!(
+        html,
+        "<h2>Shading model: {}</h2><p>\"paper\": one Psi(gamma, z) per viewpoint (Chung et al. \
+         2004); \"calibrated\": one light for the whole video, g_f · rho(gamma) · s(theta) / z².</p>",
+        m.shading_model
+    );
+    for w in &m.warnings {
+        let _ = write!(html, "<p><b>Warning:</b> {w}</p>");
+    }
+    if let Some(cv) = &m.cross_validation {
+        let _ = write!(
+            html,
+            "<h3>Cross-validation: predicting held-out frames</h3><p>Every {}-th frame ({} frames) \
+             was left out of the texture, rendered from its pose as a new view (the paper: Psi of the \
+             nearest training viewpoint) and compared with the recorded frame after one gain per \
+             channel, on the pixels that obey the shading model.</p>\
+             <table><tr><th>model</th><th>mean PSNR (dB)</th><th>mean SSIM</th></tr>",
+            cv.every,
+            cv.held_out.len()
+        );
+        let fmt = |v: Option<f64>, d: usize| v.map_or("-".into(), |x| format!("{x:.d$}"));
+        for mc in &cv.models {
+            let _ = write!(
+                html,
+                "<tr><td style=\"text-align:left\">{}</td><td>{}</td><td>{}</td></tr>",
+                mc.model,
+                fmt(mc.mean_psnr_db, 2),
+                fmt(mc.mean_ssim, 4)
+            );
+        }
+        html.push_str("</table>");
+        let colours = ["#c60", "#06c"];
+        let series: Vec<(&str, &str, Vec<f64>)> = cv
+            .models
+            .iter()
+            .zip(colours)
+            .map(|(mc, c)| {
+                (
+                    mc.model.as_str(),
+                    c,
+                    mc.frames.iter().map(|f| f.psnr_db.unwrap_or(0.0)).collect(),
+                )
+            })
+            .collect();
+        let all: Vec<f64> = series.iter().flat_map(|s| s.2.iter().copied()).collect();
+        let lo = all.iter().copied().fold(f64::INFINITY, f64::min).floor() - 1.0;
+        let hi = all.iter().copied().fold(f64::NEG_INFINITY, f64::max).ceil() + 1.0;
+        if lo.is_finite() && hi > lo {
+            html.push_str(&svg_series(
+                "PSNR (dB) of each held-out frame, in video order",
+                &series,
+                (lo, hi),
+            ));
+        }
+    }
+    if let Some(c) = calibrated {
+        let read = |p: &Path| std::fs::read(p).map_err(|e| Error::io(p, e));
+        let (rho, s, g) = (
+            tmp.join("rho.png"),
+            tmp.join("s.png"),
+            tmp.join("gains.png"),
+        );
+        plot_rho(c, &rho)?;
+        plot_light_profile(c, None, &s)?;
+        plot_gains(c, &g)?;
+        let _ = write!(
+            html,
+            "<h3>The calibrated light</h3>\
+             <figure>{}<figcaption>rho(gamma) per channel (reflectance × light × mean albedo)</figcaption></figure>\
+             <figure>{}<figcaption>s(theta): the light's angular profile and vignetting (1 on the axis)</figcaption></figure>\
+             <figure>{}<figcaption>per-frame gain (auto-exposure), frame {} = 1</figcaption></figure>",
+            img_tag(&read(&rho)?, "rho", Some(420)),
+            img_tag(&read(&s)?, "s(theta)", Some(420)),
+            img_tag(&read(&g)?, "gains", Some(520)),
+            c.reference_frame
+        );
+    }
+    Ok(())
+}
+
 /// Fig. 4: rows of images and, with references, the score table.
 fn new_views_section(html: &mut String, fig: &NewViewsFigure, tmp: &Path) -> Result<()> {
     let _ = write!(
@@ -204,6 +296,7 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
         m.counts.chart_texels,
         100.0 * m.counts.covered_texels as f64 / m.counts.chart_texels.max(1) as f64
     );
+    shading_section(&mut html, m, inputs.calibrated, tmp.path())?;
     // Fit quality over the video.
     html.push_str("<h2>Fit quality of Psi over the video</h2>");
     let r2 = |c: usize| m.fit_quality.iter().map(|f| f.r2[c]).collect::<Vec<_>>();
