@@ -1,15 +1,18 @@
-//! Time closest-hit ray casting on the benchmark scene (the same one write_bench_mesh writes)
-//! and print one JSON line: build seconds, Mrays/s (wall) and Mrays per CPU-second for camera
-//! and random rays. Thread count
-//! follows RAYON_NUM_THREADS. With a DIR argument, the hit triangle ids (i32, -1 = miss) are
-//! written to DIR/ours_camera.bin and DIR/ours_random.bin so the caller can compare hits.
+//! Time closest-hit ray casting on the benchmark scene (benches/common/phantom_rays.rs, the
+//! phantom lumen; written into DIR on first use) and print one JSON line: build seconds, and
+//! Mrays/s (wall) and Mrays per CPU-second for the 512x512 camera traced as packets
+//! (`camera`, bands of image rows through `Scene::closest_hits_image_rows`, in parallel),
+//! the same camera rays one at a time (`camera_single`), and the random rays (`random`). Thread
+//! count follows RAYON_NUM_THREADS. The hit triangle ids (i32, -1 = miss) are written to
+//! DIR/ours_camera.bin and DIR/ours_random.bin so the caller can compare hits.
 //!
-//! Usage: RAYON_NUM_THREADS=1 cargo run --release --example raycast_throughput -- [DIR] [REPEATS]
+//! Usage: RAYON_NUM_THREADS=1 cargo run --release --example raycast_throughput -- DIR [REPEATS]
 
-#[path = "../tests/common/meshes.rs"]
-mod meshes;
+#[path = "../benches/common/phantom_rays.rs"]
+mod phantom_rays;
 
-use bronchosim::raycast::Scene;
+use bronchosim::raycast::{Hit, Scene};
+use rayon::prelude::*;
 use std::io::Write;
 use std::time::Instant;
 
@@ -25,49 +28,67 @@ fn cpu_ns() -> u64 {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let dir = std::env::args()
-        .nth(1)
-        .filter(|s| !s.is_empty())
-        .map(std::path::PathBuf::from);
+    let dir = std::path::PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| ".".into()));
     let repeats: usize = std::env::args()
         .nth(2)
         .map(|s| s.parse())
         .transpose()?
         .unwrap_or(5);
-    let (mesh, cam, rnd) = meshes::bench_scene();
+    let b = phantom_rays::phantom_bench(&dir)?;
     let t0 = Instant::now();
-    let scene = Scene::new(&mesh)?;
+    let scene = Scene::new(&b.mesh)?;
     let build_s = t0.elapsed().as_secs_f64();
+    let org = b.camera.origins[0];
+    let w = phantom_rays::SIDE;
+    let packets = |s: &Scene| {
+        let mut out = vec![None; b.camera.dirs.len()];
+        out.par_chunks_mut(Scene::TILE_ROWS * w)
+            .zip(b.camera.dirs.par_chunks(Scene::TILE_ROWS * w))
+            .for_each(|(o, d)| s.closest_hits_image_rows(org, d, w, f32::INFINITY, o));
+        out
+    };
+    type Run<'a> = Box<dyn Fn(&Scene) -> Vec<Option<Hit>> + 'a>;
+    let runs: [(&str, Run); 3] = [
+        ("camera", Box::new(packets)),
+        (
+            "camera_single",
+            Box::new(|s: &Scene| s.closest_hits(&b.camera.origins, &b.camera.dirs, f32::INFINITY)),
+        ),
+        (
+            "random",
+            Box::new(|s: &Scene| s.closest_hits(&b.random.origins, &b.random.dirs, f32::INFINITY)),
+        ),
+    ];
     let mut out = Vec::new();
-    for (name, rays) in [("camera", &cam), ("random", &rnd)] {
-        let mut hits = scene.closest_hits(&rays.origins, &rays.dirs, f32::INFINITY);
+    for (name, run) in &runs {
+        let mut hits = run(&scene);
         let (mut best, mut best_cpu) = (f64::INFINITY, f64::INFINITY);
         for _ in 0..repeats {
             let (t, c) = (Instant::now(), cpu_ns());
-            hits = scene.closest_hits(&rays.origins, &rays.dirs, f32::INFINITY);
+            hits = run(&scene);
             best = best.min(t.elapsed().as_secs_f64());
             best_cpu = best_cpu.min((cpu_ns() - c) as f64 * 1e-9);
         }
         let n_hit = hits.iter().filter(|h| h.is_some()).count();
-        let n = rays.dirs.len() as f64;
+        let n = hits.len() as f64;
         out.push(format!(
             "\"{name}_mrays\": {:.4}, \"{name}_mrays_per_cpu_s\": {:.4}, \"{name}_hits\": {n_hit}",
             n / best / 1e6,
             n / best_cpu / 1e6
         ));
-        if let Some(d) = &dir {
-            let mut w =
-                std::io::BufWriter::new(std::fs::File::create(d.join(format!("ours_{name}.bin")))?);
+        if *name != "camera_single" {
+            let path = dir.join(format!("ours_{name}.bin"));
+            let mut f = std::io::BufWriter::new(std::fs::File::create(path)?);
             for h in &hits {
                 let id = h.map_or(-1i32, |h| h.tri as i32);
-                w.write_all(&id.to_le_bytes())?;
+                f.write_all(&id.to_le_bytes())?;
             }
         }
     }
     println!(
         "{{\"threads\": {}, \"triangles\": {}, \"build_s\": {build_s:.4}, {}}}",
         rayon::current_num_threads(),
-        mesh.triangles.len(),
+        b.mesh.triangles.len(),
         out.join(", ")
     );
     Ok(())

@@ -1,5 +1,6 @@
 //! A wide BVH (W = 4 or 8 child boxes per node, tested at once with SIMD) whose leaves are
-//! blocks of four triangles ([`Tri4`]), and its closest-hit and any-hit traversal.
+//! one or more consecutive blocks of four triangles ([`Tri4`]), and its closest-hit and
+//! any-hit traversal.
 //!
 //! W = 8 uses AVX (256-bit) box tests and is chosen at run time when the CPU has AVX2;
 //! W = 4 uses SSE through `wide` and runs everywhere. Built by [`super::bvh_build`].
@@ -8,8 +9,21 @@ use super::triangle::{intersect4, ShearedRay, Tri4};
 use std::mem::MaybeUninit;
 use wide::{f32x4, CmpLe};
 
-/// Child handle: an inner node index, a leaf block index with [`LEAF`] set, or [`EMPTY`].
+/// Child handle: an inner node index, a leaf with [`LEAF`] set, or [`EMPTY`]. A leaf handle
+/// holds the index of its first [`Tri4`] block in the low [`LEAF_SHIFT`] bits and the number of
+/// blocks minus one in the bits above.
 pub(crate) const LEAF: u32 = 1 << 31;
+/// Bit position of a leaf's block count.
+pub(crate) const LEAF_SHIFT: u32 = 28;
+/// Most blocks in one leaf.
+pub(crate) const LEAF_BLOCKS: usize = 8;
+
+/// The blocks of leaf handle `h`.
+#[inline(always)]
+pub(crate) fn leaf_blocks(h: u32) -> std::ops::Range<usize> {
+    let first = (h & ((1 << LEAF_SHIFT) - 1)) as usize;
+    first..first + ((h >> LEAF_SHIFT) & (LEAF_BLOCKS as u32 - 1)) as usize + 1
+}
 /// An unused child slot (its box is empty so it is never entered).
 pub(crate) const EMPTY: u32 = u32::MAX;
 /// Traversal stack entries; the build rejects trees that could overflow it.
@@ -44,7 +58,8 @@ pub(crate) struct TravRay {
 
 /// Robust box test factor (Ize 2013): far distances are inflated by 1 + 2γ(3) so that rounding
 /// never culls a box the ray touches.
-const FAR_SCALE: f32 = 1.0 + 2.0 * 3.0 * f32::EPSILON * 0.5 / (1.0 - 3.0 * f32::EPSILON * 0.5);
+pub(crate) const FAR_SCALE: f32 =
+    1.0 + 2.0 * 3.0 * f32::EPSILON * 0.5 / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
 impl TravRay {
     #[inline(always)]
@@ -170,9 +185,10 @@ impl<const W: usize> Bvh<W> {
             let (p, lines) = if h & LEAF == 0 {
                 (self.nodes.as_ptr().add(h as usize) as *const i8, W / 2)
             } else {
+                let b = leaf_blocks(h);
                 (
-                    self.leaves.as_ptr().add((h & !LEAF) as usize) as *const i8,
-                    3,
+                    self.leaves.as_ptr().add(b.start) as *const i8,
+                    (b.len() * std::mem::size_of::<Tri4>()).div_ceil(64),
                 )
             };
             // SAFETY: prefetch never faults; the handle indexes an existing node or leaf.
@@ -227,15 +243,16 @@ impl<const W: usize> Bvh<W> {
                 self.prefetch(node);
             }
             if node != EMPTY {
-                let tri = &self.leaves[(node & !LEAF) as usize];
-                if let Some((lane, t, u, v)) = intersect4(&ray.shear, tri, tbest) {
-                    tbest = t;
-                    best = Some(RawHit {
-                        t,
-                        tri: tri.id[lane],
-                        u,
-                        v,
-                    });
+                for tri in &self.leaves[leaf_blocks(node)] {
+                    if let Some((lane, t, u, v)) = intersect4(&ray.shear, tri, tbest) {
+                        tbest = t;
+                        best = Some(RawHit {
+                            t,
+                            tri: tri.id[lane],
+                            u,
+                            v,
+                        });
+                    }
                 }
             }
             // Pop the next entry that can still hold a nearer hit.
@@ -276,7 +293,9 @@ impl<const W: usize> Bvh<W> {
                 }
             }
             if node != EMPTY
-                && intersect4(&ray.shear, &self.leaves[(node & !LEAF) as usize], tmax).is_some()
+                && self.leaves[leaf_blocks(node)]
+                    .iter()
+                    .any(|tri| intersect4(&ray.shear, tri, tmax).is_some())
             {
                 return true;
             }

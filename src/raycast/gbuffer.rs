@@ -100,7 +100,8 @@ pub fn cast_frame(scene: &Scene, camera: &Camera, camera_to_world: &Affine) -> G
     cast_frame_with(scene, &RayTable::new(camera), camera_to_world)
 }
 
-/// Ray cast one frame with precomputed pixel rays (parallel over pixels).
+/// Ray cast one frame with precomputed pixel rays (parallel over bands of image rows, traced
+/// in packets of neighbouring rays by [`Scene::closest_hits_image_rows`]).
 pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine) -> GBuffer {
     let m = camera_to_world;
     let org = [m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32];
@@ -110,37 +111,47 @@ pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine)
         let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
         [(v[0] / l) as f32, (v[1] / l) as f32, (v[2] / l) as f32]
     };
-    let px: Vec<Px> = rays
-        .dirs
-        .par_iter()
-        .with_min_len(512)
-        .map(|d| {
-            let dir = r(d);
-            let Some(h) = scene.closest_hit(org, dir, f32::INFINITY) else {
-                return MISS;
-            };
-            let point = [
-                org[0] + h.t * dir[0],
-                org[1] + h.t * dir[1],
-                org[2] + h.t * dir[2],
-            ];
-            let mut n = scene.shading_normal(h.tri, h.u, h.v);
-            // V points from the surface to the viewpoint, i.e. -dir.
-            let mut gamma = -(n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2]);
-            if gamma < 0.0 {
-                n = [-n[0], -n[1], -n[2]];
-                gamma = -gamma;
-            }
-            Px {
-                z: h.t,
-                point,
-                normal: n,
-                gamma: gamma.min(1.0),
-                tri: h.tri,
-                bary: [h.u, h.v],
-            }
-        })
-        .collect();
+    let w = (rays.width as usize).max(1);
+    let mut px = vec![MISS; rays.dirs.len()];
+    // A band of image rows per task, traced as packets of neighbouring rays (tiles of
+    // 4 x TILE_ROWS), then turned into records.
+    px.par_chunks_mut(Scene::TILE_ROWS * w)
+        .zip(rays.dirs.par_chunks(Scene::TILE_ROWS * w))
+        .for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(dirs, hits), (out, row)| {
+                dirs.clear();
+                dirs.extend(row.iter().map(r));
+                hits.clear();
+                hits.resize(dirs.len(), None);
+                scene.closest_hits_image_rows(org, dirs, w, f32::INFINITY, hits);
+                for ((o, dir), h) in out.iter_mut().zip(dirs.iter()).zip(hits.iter()) {
+                    let Some(h) = h else {
+                        continue;
+                    };
+                    let point = [
+                        org[0] + h.t * dir[0],
+                        org[1] + h.t * dir[1],
+                        org[2] + h.t * dir[2],
+                    ];
+                    let mut n = scene.shading_normal(h.tri, h.u, h.v);
+                    // V points from the surface to the viewpoint, i.e. -dir.
+                    let mut gamma = -(n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2]);
+                    if gamma < 0.0 {
+                        n = [-n[0], -n[1], -n[2]];
+                        gamma = -gamma;
+                    }
+                    *o = Px {
+                        z: h.t,
+                        point,
+                        normal: n,
+                        gamma: gamma.min(1.0),
+                        tri: h.tri,
+                        bary: [h.u, h.v],
+                    };
+                }
+            },
+        );
     let mut g = GBuffer {
         width: rays.width,
         height: rays.height,

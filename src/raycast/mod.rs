@@ -1,4 +1,5 @@
-//! Ray casting the lumen mesh: a four-wide SAH BVH with SIMD box and triangle tests,
+//! Ray casting the lumen mesh: a wide SAH BVH with SIMD box and triangle tests, packets of
+//! coherent rays from one origin,
 //! watertight two-sided ray–triangle intersection, closest-hit and any-hit queries, and the
 //! per-frame geometry buffer (depth, surface point, normal, gamma, triangle, barycentrics).
 //!
@@ -9,6 +10,7 @@
 mod bvh;
 mod bvh_build;
 mod gbuffer;
+mod packet;
 mod scene;
 pub mod triangle;
 

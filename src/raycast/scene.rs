@@ -2,6 +2,7 @@
 
 use super::bvh::{Bvh, Node, RawHit};
 use super::bvh_build::build;
+use super::packet::PACKET;
 use crate::mesh::TriMesh;
 use crate::{Error, Result};
 use rayon::prelude::*;
@@ -154,6 +155,109 @@ impl Scene {
             Accel::W8(b) => unsafe { b.any_hit(origin, dir, tmax) },
             #[cfg(not(target_arch = "x86_64"))]
             Accel::W8(_) => unreachable!("eight-wide BVH is only built on x86_64"),
+        }
+    }
+
+    /// [`Scene::closest_hit`] for rays that share one origin (a camera's pixels), on the calling
+    /// thread: consecutive groups of 16 rays are traced together as one packet, which is
+    /// fastest when they are coherent (neighbouring pixels). Each `out[i]` gets the nearest hit
+    /// along `dirs[i]` with `0 < t < tmax` — the same as `closest_hit(origin, dirs[i], tmax)`
+    /// (the same triangle unless two tie at exactly the same `t`).
+    ///
+    /// # Panics
+    /// When `out.len() != dirs.len()` (a caller bug, not an input error).
+    pub fn closest_hits_common_origin(
+        &self,
+        origin: [f32; 3],
+        dirs: &[[f32; 3]],
+        tmax: f32,
+        out: &mut [Option<Hit>],
+    ) {
+        assert_eq!(
+            dirs.len(),
+            out.len(),
+            "closest_hits_common_origin: one output per ray"
+        );
+        const CHUNK: usize = 64;
+        let mut raw = [None; CHUNK];
+        for (d, o) in dirs.chunks(CHUNK).zip(out.chunks_mut(CHUNK)) {
+            let raw = &mut raw[..d.len()];
+            match &self.bvh {
+                Accel::W4(b) => b.closest_hits_packets(origin, d, tmax, raw),
+                // SAFETY: W8 is only built when AVX2 was detected.
+                #[cfg(target_arch = "x86_64")]
+                Accel::W8(b) => unsafe { b.closest_hits_packets(origin, d, tmax, raw) },
+                #[cfg(not(target_arch = "x86_64"))]
+                Accel::W8(_) => unreachable!("eight-wide BVH is only built on x86_64"),
+            }
+            for (o, r) in o.iter_mut().zip(raw.iter()) {
+                *o = r.map(|h| Hit {
+                    t: h.t,
+                    tri: h.tri,
+                    u: h.u,
+                    v: h.v,
+                });
+            }
+        }
+    }
+
+    /// Rows of the tiles [`Scene::closest_hits_image_rows`] traces together; blocks of a
+    /// multiple of this many rows trace fastest.
+    pub const TILE_ROWS: usize = PACKET / 4;
+
+    /// [`Scene::closest_hits_common_origin`] for an image block: `dirs` holds rows of
+    /// `row_len` rays each (row-major, e.g. [`Scene::TILE_ROWS`] rows of a camera's pixels).
+    /// The rays are traced in tiles of four columns by `TILE_ROWS` rows — more compact packets
+    /// than a stretch of one row — and `out` is in the order of `dirs`.
+    ///
+    /// # Panics
+    /// When `out.len() != dirs.len()`, or `row_len` is 0 or does not divide `dirs.len()`.
+    pub fn closest_hits_image_rows(
+        &self,
+        origin: [f32; 3],
+        dirs: &[[f32; 3]],
+        row_len: usize,
+        tmax: f32,
+        out: &mut [Option<Hit>],
+    ) {
+        assert!(
+            dirs.len() == out.len() && row_len > 0 && dirs.len() % row_len == 0,
+            "closest_hits_image_rows: {} rays, {} outputs, rows of {row_len}",
+            dirs.len(),
+            out.len()
+        );
+        const CHUNK: usize = 64;
+        let mut idx = [0usize; CHUNK];
+        let mut d = [[0f32; 3]; CHUNK];
+        let mut h = [None; CHUNK];
+        let mut n = 0;
+        let rows = dirs.len() / row_len;
+        let mut flush = |idx: &[usize], d: &[[f32; 3]], h: &mut [Option<Hit>]| {
+            self.closest_hits_common_origin(origin, d, tmax, h);
+            for (&i, &hit) in idx.iter().zip(h.iter()) {
+                out[i] = hit;
+            }
+        };
+        for y0 in (0..rows).step_by(Self::TILE_ROWS) {
+            let y1 = (y0 + Self::TILE_ROWS).min(rows);
+            for x0 in (0..row_len).step_by(4) {
+                let x1 = (x0 + 4).min(row_len);
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        let i = y * row_len + x;
+                        idx[n] = i;
+                        d[n] = dirs[i];
+                        n += 1;
+                        if n == CHUNK {
+                            flush(&idx, &d, &mut h);
+                            n = 0;
+                        }
+                    }
+                }
+            }
+        }
+        if n > 0 {
+            flush(&idx[..n], &d[..n], &mut h[..n]);
         }
     }
 

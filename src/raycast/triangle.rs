@@ -16,7 +16,7 @@ pub struct ShearedRay {
     pub org: [f32; 3],
     /// Index of the dominant direction axis, and the two others (kx, ky, kz).
     pub k: [usize; 3],
-    /// Shear constants Sx = d[kx]/d[kz], Sy = d[ky]/d[kz], Sz = 1/d[kz].
+    /// Shear constants `Sx = d[kx] / d[kz]`, `Sy = d[ky] / d[kz]`, `Sz = 1 / d[kz]`.
     pub s: [f32; 3],
 }
 
@@ -24,6 +24,26 @@ impl ShearedRay {
     /// Prepare a ray with origin `org` (mm) and non-zero direction `dir`.
     #[inline]
     pub fn new(org: [f32; 3], dir: [f32; 3]) -> Self {
+        let k = Self::axes(dir);
+        Self::with_sz(org, dir, k, 1.0 / dir[k[2]])
+    }
+
+    /// As [`ShearedRay::new`] given the reciprocal direction `inv` (`inv[a] = 1 / dir[a]` where
+    /// `dir[a] != 0`): saves the division, same result bit for bit.
+    #[inline]
+    pub(crate) fn with_inv(org: [f32; 3], dir: [f32; 3], inv: [f32; 3]) -> Self {
+        let k = Self::axes(dir);
+        let sz = if dir[k[2]] != 0.0 {
+            inv[k[2]]
+        } else {
+            1.0 / dir[k[2]]
+        };
+        Self::with_sz(org, dir, k, sz)
+    }
+
+    /// The dominant axis kz of `dir` and the two others, ordered to keep the winding.
+    #[inline(always)]
+    fn axes(dir: [f32; 3]) -> [usize; 3] {
         let a = [dir[0].abs(), dir[1].abs(), dir[2].abs()];
         let kz = if a[0] > a[1] {
             if a[0] > a[2] {
@@ -42,11 +62,15 @@ impl ShearedRay {
         if dir[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
-        let sz = 1.0 / dir[kz];
+        [kx, ky, kz]
+    }
+
+    #[inline(always)]
+    fn with_sz(org: [f32; 3], dir: [f32; 3], k: [usize; 3], sz: f32) -> Self {
         ShearedRay {
             org,
-            k: [kx, ky, kz],
-            s: [dir[kx] * sz, dir[ky] * sz, sz],
+            k,
+            s: [dir[k[0]] * sz, dir[k[1]] * sz, sz],
         }
     }
 }
@@ -64,7 +88,7 @@ pub struct TriHit {
 
 /// Edge functions in f64, used when the f32 ones are exactly zero (paper, section 3).
 #[inline(never)]
-fn edges_f64(ax: f32, ay: f32, bx: f32, by: f32, cx: f32, cy: f32) -> (f32, f32, f32) {
+pub(crate) fn edges_f64(ax: f32, ay: f32, bx: f32, by: f32, cx: f32, cy: f32) -> (f32, f32, f32) {
     let (ax, ay, bx, by, cx, cy) = (
         ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
     );

@@ -149,7 +149,7 @@ pub fn render_view(
 }
 
 /// [`render_view`] with precomputed rays (`opts.supersample` is taken from `rays`). Parallel
-/// over rows.
+/// over bands of image rows, traced as packets of neighbouring rays.
 pub fn render_view_with(
     inputs: &RenderInputs,
     rays: &ViewRays,
@@ -190,55 +190,72 @@ pub fn render_view_with(
     let mut mask = vec![false; w * h];
     frame
         .rgb
-        .par_chunks_mut(3 * w)
-        .zip(mask.par_chunks_mut(w))
+        .par_chunks_mut(3 * w * Scene::TILE_ROWS)
+        .zip(mask.par_chunks_mut(w * Scene::TILE_ROWS))
         .enumerate()
-        .for_each(|(y, (row, mrow))| {
-            for x in 0..w {
-                let p = y * w + x;
-                let mut acc = [0.0f32; 3];
-                let mut hits = 0u32;
-                for d in &rays.dirs[p * ss..(p + 1) * ss] {
-                    let dir = std::array::from_fn(|i| {
-                        rot[i][0] * d[0] + rot[i][1] * d[1] + rot[i][2] * d[2]
-                    });
-                    let Some(hit) = inputs.scene.closest_hit(org, dir, f32::INFINITY) else {
-                        continue;
-                    };
-                    let n = inputs.scene.shading_normal(hit.tri, hit.u, hit.v);
-                    let gamma = (n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2])
-                        .abs()
-                        .min(1.0);
-                    let z = hit.t;
-                    let [a, b, c] = inputs.tri_uv[hit.tri as usize];
-                    let wa = 1.0 - hit.u - hit.v;
-                    let u = wa * a[0] + hit.u * b[0] + hit.v * c[0];
-                    let v = wa * a[1] + hit.u * b[1] + hit.v * c[1];
-                    let albedo = if opts.mipmap {
-                        // Footprint along the surface's steepest direction: z·angle/gamma.
-                        let fp = z * rays.pixel_angle[p] * angle_scale / gamma.max(1e-3);
-                        tex.sample(u, v, tex.lod(fp))
-                    } else {
-                        tex.sample_bilinear(u, v)
-                    };
-                    let (scale, offset) = if opts.albedo_only {
-                        ([1.0; 3], [0.0; 3])
-                    } else {
-                        shade.eval_rgb(gamma, z, d[2])
-                    };
-                    for k in 0..3 {
-                        acc[k] += scale[k] * albedo[k] + offset[k];
+        .for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(dirs, hits), (c, (rows, mrows))| {
+                // Trace a band of rows together (packets of neighbouring rays), then shade.
+                let (y0, ny) = (Scene::TILE_ROWS * c, mrows.len() / w);
+                let row_dirs = &rays.dirs[y0 * w * ss..(y0 + ny) * w * ss];
+                dirs.clear();
+                dirs.extend(row_dirs.iter().map(|d| -> [f32; 3] {
+                    std::array::from_fn(|i| rot[i][0] * d[0] + rot[i][1] * d[1] + rot[i][2] * d[2])
+                }));
+                hits.clear();
+                hits.resize(dirs.len(), None);
+                inputs
+                    .scene
+                    .closest_hits_image_rows(org, dirs, w * ss, f32::INFINITY, hits);
+                for i in 0..ny * w {
+                    let p = y0 * w + i;
+                    let mut acc = [0.0f32; 3];
+                    let mut n_hit = 0u32;
+                    let cam_dirs = &row_dirs[i * ss..(i + 1) * ss];
+                    for ((dir, hit), d) in dirs[i * ss..(i + 1) * ss]
+                        .iter()
+                        .zip(&hits[i * ss..(i + 1) * ss])
+                        .zip(cam_dirs)
+                    {
+                        let Some(hit) = hit else {
+                            continue;
+                        };
+                        let n = inputs.scene.shading_normal(hit.tri, hit.u, hit.v);
+                        let gamma = (n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2])
+                            .abs()
+                            .min(1.0);
+                        let z = hit.t;
+                        let [a, b, c] = inputs.tri_uv[hit.tri as usize];
+                        let wa = 1.0 - hit.u - hit.v;
+                        let u = wa * a[0] + hit.u * b[0] + hit.v * c[0];
+                        let v = wa * a[1] + hit.u * b[1] + hit.v * c[1];
+                        let albedo = if opts.mipmap {
+                            // Footprint along the surface's steepest direction: z·angle/gamma.
+                            let fp = z * rays.pixel_angle[p] * angle_scale / gamma.max(1e-3);
+                            tex.sample(u, v, tex.lod(fp))
+                        } else {
+                            tex.sample_bilinear(u, v)
+                        };
+                        let (scale, offset) = if opts.albedo_only {
+                            ([1.0; 3], [0.0; 3])
+                        } else {
+                            shade.eval_rgb(gamma, z, d[2])
+                        };
+                        for k in 0..3 {
+                            acc[k] += scale[k] * albedo[k] + offset[k];
+                        }
+                        n_hit += 1;
                     }
-                    hits += 1;
-                }
-                if hits > 0 {
-                    let s = opts.gain / hits as f32;
-                    for k in 0..3 {
-                        row[3 * x + k] = acc[k] * s;
+                    if n_hit > 0 {
+                        let s = opts.gain / n_hit as f32;
+                        for k in 0..3 {
+                            rows[3 * i + k] = acc[k] * s;
+                        }
+                        mrows[i] = true;
                     }
-                    mrow[x] = true;
                 }
-            }
-        });
+            },
+        );
     Ok((frame, mask))
 }
