@@ -231,7 +231,7 @@ impl Reader<'_> {
         ty: json::accessor::Type,
         what: &str,
     ) -> std::result::Result<Vec<f32>, String> {
-        let acc_ty = self.root.accessors.get(a).map(|x| x.type_.clone());
+        let acc_ty = self.root.accessors.get(a).map(|x| x.type_);
         if acc_ty != Some(Checked::Valid(ty)) {
             return Err(format!("{what}: expected a {ty:?} accessor"));
         }
