@@ -1,7 +1,7 @@
 //! Novel-view rendering: one 320x320 view (90 degree field of view) from inside the trachea of
 //! the ~300k-triangle benchmark airway, with a 4096² mip-mapped texture and 200 fitted
 //! viewpoints, for the paper's nearest-viewpoint shading and 4-nearest blending (and 2x2
-//! supersampling). Threads follow RAYON_NUM_THREADS; throughput is in views per second.
+//! supersampling), and for the calibrated light. Threads follow RAYON_NUM_THREADS; throughput is in views per second.
 
 #[path = "../tests/common/meshes.rs"]
 mod meshes;
@@ -14,7 +14,7 @@ use bronchosim::render::{
     render_view_with, MipOptions, MipTexture, RenderInputs, RenderOptions, ShadingMode, ViewRays,
     ViewpointIndex,
 };
-use bronchosim::shading::{ExclusionCounts, PsiModel};
+use bronchosim::shading::{CalibratedModel, ExclusionCounts, PsiModel};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 fn bench(c: &mut Criterion) {
@@ -103,6 +103,30 @@ fn bench(c: &mut Criterion) {
             b.iter(|| render_view_with(&inputs, &rays, &pose, &opts).unwrap())
         });
     }
+    // The calibrated light (the default shading of a built model): rho(gamma) s(theta) / z².
+    let light = CalibratedModel {
+        rho: [
+            vec![2.0, 40.0, 80.0, 120.0],
+            vec![1.0, 20.0, 40.0, 60.0],
+            vec![1.0, 15.0, 30.0, 45.0],
+        ],
+        s: vec![1.0, 0.8, 0.6, 0.5],
+        cos_theta_edge: 0.5,
+        gains: vec![1.0],
+        reference_frame: 0,
+        ambient: None,
+        rms_residual: [0.0; 3],
+        samples_used: 0,
+    };
+    let calibrated = RenderInputs {
+        calibrated: Some(&light),
+        ..inputs
+    };
+    let rays = ViewRays::new(&camera, 1).unwrap();
+    let opts = RenderOptions::default();
+    g.bench_function("view_320_calibrated", |b| {
+        b.iter(|| render_view_with(&calibrated, &rays, &pose, &opts).unwrap())
+    });
     g.finish();
 }
 

@@ -360,9 +360,17 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
     let _ = write!(
         html,
         "<h2>Timings (s)</h2><table><tr><th>read case</th><th>segment</th><th>mesh</th><th>atlas</th>\
-         <th>fit Psi</th><th>de-light + fuse</th></tr><tr><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td>\
+         <th>fit Psi</th><th>calibrated light</th><th>cross-validation</th><th>de-light + fuse</th>\
+         </tr><tr><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td>\
          <td>{:.2}</td><td>{:.2}</td><td>{:.2}</td></tr></table>",
-        t.read_case, t.segment, t.mesh, t.atlas, t.fit, t.fusion
+        t.read_case,
+        t.segment,
+        t.mesh,
+        t.atlas,
+        t.fit,
+        t.calibrated_fit,
+        t.cross_validation,
+        t.fusion
     );
     html.push_str("</body></html>\n");
     crate::io::atomic::write_bytes_atomic(path, html.as_bytes())

@@ -188,6 +188,12 @@ pub fn evaluate_with_baselines(
     let case = Case::open(&case_path)?;
     let (views, _) = load_truth(truth_dir)?;
     let rendered = crate::render::views_io::load_rendered(rendered_dir, &views)?;
-    let label = format!("rendered ({})", rendered_dir.display());
+    let label = format!(
+        "rendered ({})",
+        rendered_dir.file_name().map_or_else(
+            || rendered_dir.display().to_string(),
+            |n| n.to_string_lossy().into_owned()
+        )
+    );
     Ok(evaluate_against_truth(&model, &case, truth_dir, Some((label, rendered)))?.scores)
 }
