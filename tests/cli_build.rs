@@ -1,30 +1,16 @@
 //! The whole pipeline from the command line: `phantom` writes a small case, `build` turns it
 //! into a model folder; the folder holds what DESIGN.md promises and its numbers are sane.
 
-use std::path::Path;
-use std::process::Command;
-
-fn run(args: &[&str], cwd: &Path) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_bronchosim"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .unwrap()
-}
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{matrix, ok, phantom, run};
 
 #[test]
 fn phantom_then_build_writes_the_model_folder() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let o = run(
-        &[
-            "phantom", "--out", "case", "--frames", "8", "--size", "128x128", "--quiet",
-        ],
-        dir,
-    );
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let o = run(&["build", "case", "--out", "model", "--quiet"], dir);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    phantom(dir, 8, "128x128");
+    ok(&run(&["build", "case", "--out", "model", "--quiet"], dir));
     let model = dir.join("model");
     for f in [
         "model.json",
@@ -73,25 +59,19 @@ fn phantom_then_build_writes_the_model_folder() {
     let s: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(model.join("shading.json")).unwrap())
             .unwrap();
-    assert_eq!(s["model"], "paper");
+    // The shading model the cross-validation chose is the one recorded in both files.
+    assert_eq!(s["model"], m["shading_model"]);
+    assert!(s["model"] == "paper" || s["model"] == "calibrated");
     let vps = s["viewpoints"].as_array().unwrap();
     assert_eq!(vps.len(), 8);
     let poses: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("case/poses.json")).unwrap())
             .unwrap();
     for (vp, pose) in vps.iter().zip(poses["frames"].as_array().unwrap()) {
-        let a: Vec<f64> = vp["camera_to_world"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
-        let b: Vec<f64> = pose["camera_to_world"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
+        let (a, b) = (
+            matrix(&vp["camera_to_world"]),
+            matrix(&pose["camera_to_world"]),
+        );
         assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-9));
         assert!(vp["z_min"].as_f64().unwrap() < vp["z_max"].as_f64().unwrap());
     }

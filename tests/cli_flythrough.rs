@@ -2,8 +2,6 @@
 //! cameras stay in the lumen, move evenly from the first training camera to the last, every
 //! frame looks down a lit tube, and path.json / flythrough.mp4 are what they claim to be.
 
-use std::path::Path;
-use std::process::Command;
 
 use bronchosim::io::frames::read_png;
 use bronchosim::io::poses::{camera_centre, read_poses};
@@ -11,22 +9,9 @@ use bronchosim::math::{Point3, Vector3};
 use bronchosim::model::Model;
 use bronchosim::render::{read_views, render_view, RenderOptions};
 
-fn run(args: &[&str], cwd: &Path) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_bronchosim"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .unwrap()
-}
-
-fn ok(o: &std::process::Output) {
-    assert!(
-        o.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{ok, phantom, run};
 
 /// Directions on the unit sphere (Fibonacci lattice).
 fn sphere(n: usize) -> Vec<[f32; 3]> {
@@ -49,12 +34,7 @@ fn mean(frame: &bronchosim::io::frames::Frame) -> f64 {
 fn flythrough_stays_in_the_lumen_and_renders_a_lit_tube() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    ok(&run(
-        &[
-            "phantom", "--out", "case", "--frames", "8", "--size", "128x128", "--quiet",
-        ],
-        dir,
-    ));
+    phantom(dir, 8, "128x128");
     ok(&run(&["build", "case", "--out", "model", "--quiet"], dir));
     let o = run(
         &["flythrough", "model", "--out", "fly", "--frames", "12"],
@@ -175,7 +155,7 @@ fn flythrough_stays_in_the_lumen_and_renders_a_lit_tube() {
         mp4.is_file(),
         "no flythrough.mp4 (ffmpeg is installed here)"
     );
-    let probe = Command::new("ffprobe")
+    let probe = std::process::Command::new("ffprobe")
         .args(["-v", "error", "-select_streams", "v:0", "-count_frames"])
         .args(["-show_entries", "stream=nb_read_frames,codec_name,pix_fmt"])
         .args(["-of", "default=noprint_wrappers=1"])

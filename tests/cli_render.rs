@@ -3,19 +3,10 @@
 //! next to the paper's method and the two baselines on the same pixels.
 
 use std::path::Path;
-use std::process::Command;
 
-fn run(args: &[&str], cwd: &Path) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_bronchosim"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .unwrap()
-}
-
-fn ok(o: &std::process::Output) {
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-}
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{ok, phantom, run};
 
 fn mean_psnr(scores: &serde_json::Value, method_prefix: &str) -> f64 {
     scores
@@ -32,12 +23,7 @@ fn mean_psnr(scores: &serde_json::Value, method_prefix: &str) -> f64 {
 fn render_and_evaluate_the_truth_views_against_the_baselines() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    ok(&run(
-        &[
-            "phantom", "--out", "case", "--frames", "24", "--size", "160x160", "--quiet",
-        ],
-        dir,
-    ));
+    phantom(dir, 24, "160x160");
     ok(&run(
         &[
             "build",
@@ -156,12 +142,7 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
     let shading = read("model/shading.json");
     let truth = read("case/truth/gains.json");
     let cal = &shading["calibrated"];
-    let gains: Vec<f64> = cal["gains"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|g| g.as_f64().unwrap())
-        .collect();
+    let gains = cli::matrix(&cal["gains"]);
     let tg: Vec<f64> = truth["frames"]
         .as_array()
         .unwrap()
@@ -177,12 +158,7 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
     let worst_gain = gain_err.iter().fold(0.0f64, |m, e| m.max(e.abs()));
     let rms_gain = (gain_err.iter().map(|e| e * e).sum::<f64>() / gain_err.len() as f64).sqrt();
     let k = truth["cone_exponent"].as_f64().unwrap();
-    let coeffs: Vec<f64> = cal["s"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| c.as_f64().unwrap())
-        .collect();
+    let coeffs = cli::matrix(&cal["s"]);
     let edge = cal["cos_theta_edge"].as_f64().unwrap();
     let model: bronchosim::shading::CalibratedModel = serde_json::from_value(cal.clone()).unwrap();
     assert_eq!(model.s, coeffs);
@@ -329,12 +305,7 @@ fn albedo_error(
 fn fused_albedo_matches_the_phantom_truth() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    ok(&run(
-        &[
-            "phantom", "--out", "case", "--frames", "24", "--size", "160x160", "--quiet",
-        ],
-        dir,
-    ));
+    phantom(dir, 24, "160x160");
     ok(&run(&["build", "case", "--out", "model", "--quiet"], dir));
     let model = bronchosim::model::Model::load(&dir.join("model")).unwrap();
     let truth = dir.join("case/truth");
