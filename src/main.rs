@@ -98,6 +98,10 @@ enum Command {
         /// held-out frames better).
         #[arg(long, default_value = "auto")]
         shading: String,
+        /// Fit the calibrated light's inter-reflection term a_f (off by default: measured on the
+        /// phantom it did not clearly help, see BENCHMARKS.md).
+        #[arg(long)]
+        ambient: bool,
         /// Hold out every N-th frame to cross-validate both shading models (0: skip).
         #[arg(long, default_value_t = 5)]
         cross_validate_every: usize,
@@ -173,6 +177,9 @@ enum Command {
         /// Rays per pixel along each axis (antialiasing).
         #[arg(long, default_value_t = 1)]
         supersample: u32,
+        /// Write the texture alone (the fused albedo, unshaded), e.g. to inspect the texture.
+        #[arg(long)]
+        albedo_only: bool,
         /// Replace an existing output folder.
         #[arg(long)]
         force: bool,
@@ -276,6 +283,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             fusion,
             shading,
             cross_validate_every,
+            ambient,
             truth,
             force,
         } => {
@@ -293,6 +301,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 ..Default::default()
             };
             opts.atlas.texel_mm = texel_mm;
+            opts.calibrated.ambient = ambient;
             opts.fusion.method = match fusion.as_str() {
                 "max" => bronchosim::texture::fusion::FusionMethod::MaxWeightSmoothed {
                     sigma_texels: 2.0,
@@ -437,6 +446,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             shading,
             k,
             supersample,
+            albedo_only,
             force,
         } => {
             let shading = match shading.as_str() {
@@ -449,6 +459,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 render: RenderOptions {
                     shading,
                     supersample: supersample.max(1),
+                    albedo_only,
                     ..Default::default()
                 },
                 force,

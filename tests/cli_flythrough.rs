@@ -2,7 +2,6 @@
 //! cameras stay in the lumen, move evenly from the first training camera to the last, every
 //! frame looks down a lit tube, and path.json / flythrough.mp4 are what they claim to be.
 
-
 use bronchosim::io::frames::read_png;
 use bronchosim::io::poses::{camera_centre, read_poses};
 use bronchosim::math::{Point3, Vector3};
