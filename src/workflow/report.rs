@@ -7,6 +7,7 @@ use crate::io::frames::{write_png_srgb8, Frame};
 use crate::model::ModelManifest;
 use crate::raycast::GBuffer;
 use crate::shading::calibrated_plots::{plot_gains, plot_light_profile, plot_rho};
+use crate::shading::frame_shading::FrameShading;
 use crate::shading::plots::{plot_psi_slices, plot_samples_density};
 use crate::shading::psi::PsiModel;
 use crate::shading::samples::SampleSet;
@@ -57,35 +58,41 @@ fn png_of(frame: &Frame, tmp: &Path, name: &str) -> Result<Vec<u8>> {
     std::fs::read(&p).map_err(|e| Error::io(&p, e))
 }
 
-/// Fig. 3 of the paper for one frame: the predicted shading Psi(gamma, z) per pixel and the
-/// extracted texture (frame / Psi), both scaled for display.
-fn shading_and_texture(f: &ReportFrame) -> (Frame, Frame) {
+/// Fig. 3 of the paper for one frame: the predicted shading per pixel (the frame's Psi, or the
+/// calibrated light at its gain) and the extracted texture (frame / shading), both scaled for
+/// display.
+fn shading_and_texture(
+    f: &ReportFrame,
+    shading: FrameShading,
+    cos_theta: &[f32],
+) -> (Frame, Frame) {
     let (w, h) = (f.frame.width, f.frame.height);
     let mut shade = Frame::new(w, h);
     let mut tex = Frame::new(w, h);
     let mut max_shade = 0f64;
     let mut vals = Vec::with_capacity((w * h) as usize);
-    for i in 0..(w * h) as usize {
+    for (i, &ct) in cos_theta.iter().enumerate().take((w * h) as usize) {
         let g = &f.gbuffer;
         if g.tri[i] == u32::MAX || g.gamma[i] <= 0.0 {
             vals.push(None);
             continue;
         }
-        let p = f.psi.eval_rgb(g.gamma[i] as f64, g.z[i] as f64);
+        let s = shading.shade(g.gamma[i] as f64, g.z[i] as f64, ct as f64);
+        let p = s.scale;
         max_shade = max_shade.max(p[1]);
-        vals.push(Some(p));
+        vals.push(Some((p, s.offset)));
     }
     let mut tex_vals: Vec<f32> = Vec::new();
     for (i, v) in vals.iter().enumerate() {
         // Where Psi predicts little light (far down the airway) its quotient is noise: the
         // texture stage drops those observations too (DelightOptions::min_relative_weight).
-        if let Some(p) = v {
+        if let Some((p, offset)) = v {
             let lit = p[1] >= 0.05 * max_shade;
             for (ch, &pc) in p.iter().enumerate() {
                 let s = (pc / max_shade.max(1e-12)) as f32;
                 shade.rgb[3 * i + ch] = s;
                 if lit && pc > 1e-6 {
-                    let t = f.frame.rgb[3 * i + ch] / pc as f32;
+                    let t = (f.frame.rgb[3 * i + ch] - offset[ch] as f32) / pc as f32;
                     tex.rgb[3 * i + ch] = t;
                     tex_vals.push(t);
                 }
@@ -311,6 +318,17 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
     ));
     // Fig. 2 and Fig. 3 for a few frames.
     html.push_str("<h2>Shading fit (paper Fig. 2) and de-lighting (paper Fig. 3)</h2>");
+    // cos theta of every pixel's ray (the calibrated light's angular profile).
+    let cam = &m.camera;
+    let cos_theta: Vec<f32> = (0..cam.width as usize * cam.height as usize)
+        .map(|i| {
+            let (u, v) = (
+                (i % cam.width as usize) as f64,
+                (i / cam.width as usize) as f64,
+            );
+            cam.pixel_ray(u, v).z as f32
+        })
+        .collect();
     for f in inputs.frames {
         let _ = write!(html, "<h3>Frame {}</h3>", f.index);
         let dens = tmp.path().join(format!("dens{}.png", f.index));
@@ -326,14 +344,25 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
         let fit = tmp.path().join(format!("fit{}.png", f.index));
         plot_psi_slices(&f.samples, &f.psi, &slices, &fit)?;
         let read = |p: &Path| std::fs::read(p).map_err(|e| Error::io(p, e));
-        let (shade, tex) = shading_and_texture(f);
+        let shading = match inputs.calibrated {
+            Some(model) if m.shading_model == "calibrated" => FrameShading::Calibrated {
+                model,
+                frame: f.index,
+            },
+            _ => FrameShading::Paper(&f.psi),
+        };
+        let (shade, tex) = shading_and_texture(f, shading, &cos_theta);
+        let name = match shading {
+            FrameShading::Paper(_) => "Psi(gamma, z)",
+            FrameShading::Calibrated { .. } => "g_f rho(gamma) s(theta) / z²",
+        };
         let _ = write!(
             html,
             "<figure>{}<figcaption>(a) samples in (gamma, z): uneven density</figcaption></figure>\
              <figure>{}<figcaption>(b) Psi against the samples in depth slices</figcaption></figure><br>\
              <figure>{}<figcaption>frame</figcaption></figure>\
-             <figure>{}<figcaption>predicted shading Psi(gamma, z)</figcaption></figure>\
-             <figure>{}<figcaption>extracted texture (frame / Psi)</figcaption></figure>\
+             <figure>{}<figcaption>predicted shading {name}</figcaption></figure>\
+             <figure>{}<figcaption>extracted texture (frame / shading)</figcaption></figure>\
              <p>R² {:.3} / {:.3} / {:.3}; samples used {}; excluded: no hit {}, grazing {}, saturated {}, dark {}.</p>",
             img_tag(&read(&dens)?, "Fig. 2a", Some(420)),
             img_tag(&read(&fit)?, "Fig. 2b", Some(420)),
