@@ -35,7 +35,8 @@ pub struct RenderSummary {
     pub camera_source: String,
     /// The camera used.
     pub camera: Camera,
-    /// How the fitted shading was chosen ("nearest" or "k-nearest (k = 4)").
+    /// The shading of the new views: "calibrated light", or how the paper's fitted Psi were
+    /// chosen ("nearest" or "k-nearest (k = 4)").
     pub shading: String,
     /// Images written (relative to the output folder).
     pub images: Vec<String>,
@@ -92,7 +93,10 @@ pub fn render_command(
         views: views_json.display().to_string(),
         camera_source,
         camera,
-        shading: shading_mode_name(opts.render.shading),
+        shading: match model.calibrated() {
+            Some(_) => "calibrated light".into(),
+            None => shading_mode_name(opts.render.shading),
+        },
         images,
         load_seconds,
         render_seconds,
