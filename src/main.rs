@@ -167,8 +167,9 @@ enum Command {
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
-        /// Shading of a new view: "nearest" (the paper: Psi of the nearest fitted viewpoint) or
-        /// "blend" (the k nearest viewpoints' Psi blended continuously).
+        /// For a model shaded with the paper's Psi: "nearest" (the paper: Psi of the nearest
+        /// fitted viewpoint) or "blend" (the k nearest viewpoints' Psi blended continuously).
+        /// A model with the calibrated light needs no viewpoint lookup and ignores it.
         #[arg(long, default_value = "blend")]
         shading: String,
         /// Viewpoints blended by --shading blend.
