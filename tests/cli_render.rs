@@ -87,13 +87,15 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
          {flat:.2}"
     );
     // The render command writes what the in-memory renderer makes with the model's shading
-    // (the calibrated light, chosen by cross-validation; 8-bit PNG round trip only).
+    // (the calibrated light, chosen by cross-validation).
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("model/model.json")).unwrap())
             .unwrap();
     assert_eq!(m["shading_model"], "calibrated");
+    // Tolerance: the PNG clips at white, the in-memory view keeps values above 1 that the
+    // evaluation's gain (< 1 here) brings back under white.
     assert!(
-        (rendered - calibrated).abs() < 0.1,
+        (rendered - calibrated).abs() < 0.3,
         "{rendered} vs {calibrated}"
     );
     // The report's table is the same evaluation.
@@ -157,6 +159,13 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
         .collect();
     let worst_gain = gain_err.iter().fold(0.0f64, |m, e| m.max(e.abs()));
     let rms_gain = (gain_err.iter().map(|e| e * e).sum::<f64>() / gain_err.len() as f64).sqrt();
+    // The same with the one free global scale fitted (geometric mean of fitted / true = 1)
+    // instead of taken from frame 0 alone.
+    let log_err: Vec<f64> = gains.iter().zip(&tg).map(|(g, t)| (g / t).ln()).collect();
+    let mean_log = log_err.iter().sum::<f64>() / log_err.len() as f64;
+    let scale_err: Vec<f64> = log_err.iter().map(|l| (l - mean_log).exp() - 1.0).collect();
+    let worst_scaled = scale_err.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+    let rms_scaled = (scale_err.iter().map(|e| e * e).sum::<f64>() / scale_err.len() as f64).sqrt();
     let k = truth["cone_exponent"].as_f64().unwrap();
     let coeffs = cli::matrix(&cal["s"]);
     let edge = cal["cos_theta_edge"].as_f64().unwrap();
@@ -173,18 +182,27 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
         / (m + 1) as f64)
         .sqrt();
     println!(
-        "gains: worst {:.2}%, RMS {:.2}% off; cone: {:.2}% RMS over 0..{:.1} deg",
+        "gains relative to frame 0: worst {:.2}%, RMS {:.2}%; with the global scale fitted: \
+         worst {:.2}%, RMS {:.2}%; cone: {:.2}% RMS over 0..{:.1} deg",
         100.0 * worst_gain,
         100.0 * rms_gain,
+        100.0 * worst_scaled,
+        100.0 * rms_scaled,
         100.0 * cone_rms,
         theta_edge.to_degrees()
     );
     assert!(cone_rms < 0.05, "cone RMS {cone_rms}");
-    // Issue 8 aims at 2% per gain; measured here: worst 12%, RMS 5%. Each frame's gain absorbs
-    // the mean albedo of the mucosa it sees (vessels, pale patches) under the uniform-albedo
-    // fit; tying frames through shared surface patches instead drifts the gains along the
-    // video (see the issue note). The bound below pins today's level so a regression shows.
+    // Issue 8 aims at 2% per gain; measured here (24 frames): relative to frame 0 worst 8.5%,
+    // RMS 6.0%; with the global scale fitted worst 7.5%, RMS 3.5%. Under the uniform-albedo
+    // fit each frame's gain absorbs the mean albedo of the mucosa it sees (vessels, pale
+    // patches); one correction against the fused texture (workflow::gain_refine) halves the
+    // frame-to-frame part but frame 0, seen by few other frames, stays uncertain. The bounds
+    // pin today's level so a regression shows.
     assert!(rms_gain < 0.07, "gain RMS error {rms_gain}");
+    assert!(
+        rms_scaled < 0.045,
+        "gain RMS error, global scale fitted: {rms_scaled}"
+    );
 
     // An existing output folder is kept without --force; with it, replaced.
     let again = run(

@@ -32,6 +32,7 @@ use crate::texture::output::{encode_albedo, write_texture_outputs};
 use crate::texture::texels::TexelSet;
 use crate::workflow::build_frames::{CaseFrames, DepthCache, FrameShadingSource};
 use crate::workflow::cross_validate::{cross_validate, CrossValidationInputs};
+use crate::workflow::gain_refine::refine_gains_against_texture;
 use crate::workflow::new_views_figure::{novel_figure, truth_figure};
 use crate::workflow::progress::Progress;
 use crate::workflow::report::{write_report, ReportFrame, ReportInputs};
@@ -72,6 +73,8 @@ pub struct BuildOptions {
     pub calibrated: CalibratedOptions,
     /// Pooling of the calibrated fit's samples.
     pub pool: PoolOptions,
+    /// Rounds of correcting the calibrated light's gains against a texture fused with them.
+    pub refine_gains: usize,
     /// Hold out every k-th frame for the cross-validation (0: no cross-validation).
     pub cross_validate_every: usize,
     /// Most frames held out.
@@ -109,6 +112,7 @@ impl Default for BuildOptions {
             // held-out frames, and it trades with s(theta) (cone error 1.7% -> 6.6% RMS).
             calibrated: CalibratedOptions::default(),
             pool: PoolOptions::default(),
+            refine_gains: 1,
             cross_validate_every: 5,
             cross_validate_max_frames: 24,
             depth_cache_bytes: 1 << 30,
@@ -280,8 +284,34 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
             }
         }
     };
-    timings.calibrated_fit = t.elapsed().as_secs_f64();
     drop(pooled);
+    // One correction of the gains against a texture fused with them (see gain_refine).
+    let mut calibrated = calibrated;
+    for _ in 0..if calibrated.is_some() {
+        opts.refine_gains
+    } else {
+        0
+    } {
+        let model = calibrated.as_mut().expect("checked above");
+        let first = model.clone();
+        let mut stream = CaseFrames::new(
+            &case,
+            &scene,
+            &rays,
+            FrameShadingSource::Calibrated(&first),
+            &cache,
+            (0..n).collect(),
+            Progress::new(
+                "refine gains",
+                ((opts.fusion.method.passes() + 1) * n) as u64,
+                opts.quiet,
+            ),
+        );
+        let fused = fuse(&texels, &mut stream, &opts.fusion)?;
+        refine_gains_against_texture(model, &texels, &fused, &mut stream, &opts.fusion.delight)?;
+        stream.progress.finish();
+    }
+    timings.calibrated_fit = t.elapsed().as_secs_f64();
 
     let tri_uv = triangle_uvs(&atlas);
     let t = Instant::now();
