@@ -36,7 +36,7 @@ pub fn refine_gains_against_texture<S: FrameStream + ?Sized>(
         let delit = delight_frame(texels, &obs, opts)?;
         let mut pairs: Vec<(f64, f64)> = Vec::new();
         for (slot, (&w, v)) in delit.weight.iter().zip(&delit.value).enumerate() {
-            if !(w > 0.0) {
+            if w.is_nan() || w <= 0.0 {
                 continue;
             }
             let t = texels.texel[slot] as usize;
