@@ -362,35 +362,28 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         ("calibrated", Some(c)) => FrameShadingSource::Calibrated(c),
         _ => FrameShadingSource::Paper(&psi),
     };
-    let mut stream = CaseFrames::new(
-        &case,
-        &scene,
-        &rays,
-        source,
-        &cache,
-        (0..n).collect(),
-        Progress::new("de-light + fuse", (passes * n) as u64, opts.quiet),
-    );
-    let fused = fuse(&texels, &mut stream, &opts.fusion)?;
-    stream.progress.finish();
-    drop(stream);
+    // Every frame de-lit with `source` and fused, streaming.
+    let fuse_all = |source: FrameShadingSource, label: &str| {
+        let mut stream = CaseFrames::new(
+            &case,
+            &scene,
+            &rays,
+            source,
+            &cache,
+            (0..n).collect(),
+            Progress::new(label, (passes * n) as u64, opts.quiet),
+        );
+        let fused = fuse(&texels, &mut stream, &opts.fusion);
+        stream.progress.finish();
+        fused
+    };
+    let fused = fuse_all(source, "de-light + fuse")?;
     let mut filled = fused.filled(&texels)?;
     let balance = colour_balance(&mut filled, &fused.covered, pixel_sum);
     // With the calibrated light chosen, the paper's own texture (de-lit by each frame's Psi) is
     // kept beside it: the paper's method stays the reference new views are compared against.
     let paper_texture = if shading_model == "calibrated" {
-        let mut stream = CaseFrames::new(
-            &case,
-            &scene,
-            &rays,
-            FrameShadingSource::Paper(&psi),
-            &cache,
-            (0..n).collect(),
-            Progress::new("de-light + fuse (paper)", (passes * n) as u64, opts.quiet),
-        );
-        let fused = fuse(&texels, &mut stream, &opts.fusion)?;
-        stream.progress.finish();
-        drop(stream);
+        let fused = fuse_all(FrameShadingSource::Paper(&psi), "de-light + fuse (paper)")?;
         let mut rgb = fused.filled(&texels)?;
         let paper_balance = colour_balance(&mut rgb, &fused.covered, pixel_sum);
         let img = encode_albedo(&rgb, atlas.width, atlas.height, &fused.covered)?;
