@@ -89,6 +89,9 @@ enum Command {
         /// Texel size of the albedo atlas (mm).
         #[arg(long, default_value_t = 0.15)]
         texel_mm: f64,
+        /// Target edge length of the decimated lumen mesh (mm).
+        #[arg(long, default_value_t = 0.7)]
+        edge_mm: f64,
         /// Fusion of the de-lit frames: "max" (the paper's max-weight choice with smoothed
         /// weights) or "average" (predicted-intensity-weighted average).
         #[arg(long, default_value = "average")]
@@ -281,6 +284,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             case,
             out,
             texel_mm,
+            edge_mm,
             fusion,
             shading,
             cross_validate_every,
@@ -302,6 +306,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 ..Default::default()
             };
             opts.atlas.texel_mm = texel_mm;
+            opts.segment.mesh.decimate.target_edge_mm = edge_mm;
             opts.calibrated.ambient = ambient;
             opts.fusion.method = match fusion.as_str() {
                 "max" => bronchosim::texture::fusion::FusionMethod::MaxWeightSmoothed {
