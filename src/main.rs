@@ -259,7 +259,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if !cli.quiet {
                 let m = &d.manifest;
                 println!(
-                    "phantom case {} ({} frames, {:.1} s)\nmodel {} in {:.1} s: {} triangles, atlas {}x{}, {:.0}% of chart texels seen, mean R² of Psi {:.3}\nreport {}",
+                    "phantom case {} ({} frames, {:.1} s)\nmodel {} in {:.1} s: {} triangles, atlas {}x{}, {:.0}% of chart texels seen, mean R² of Psi {:.3}, shading {}{}\nreport {}",
                     d.case.display(),
                     m.counts.frames,
                     d.phantom_seconds,
@@ -270,6 +270,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     m.counts.atlas_size[1],
                     100.0 * m.counts.covered_texels as f64 / m.counts.chart_texels.max(1) as f64,
                     m.mean_r2,
+                    m.shading_model,
+                    m.cross_validation.as_ref().map_or(String::new(), |cv| {
+                        let parts: Vec<String> = cv
+                            .models
+                            .iter()
+                            .map(|mc| {
+                                format!("{} {:.2} dB", mc.model, mc.mean_psnr_db.unwrap_or(f64::NAN))
+                            })
+                            .collect();
+                        format!(" (held-out frames: {})", parts.join(", "))
+                    }),
                     d.model.join("report.html").display()
                 );
                 println!(
