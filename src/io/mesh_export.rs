@@ -42,21 +42,51 @@ fn check_mesh(path: &Path, mesh: &TriMesh, uvs: Option<&[[f32; 2]]>) -> Result<(
 /// Binary little-endian PLY: vertex x y z nx ny nz (float, mm; normals unit, into the lumen),
 /// faces as `list uchar uint`.
 pub fn write_ply(path: &Path, mesh: &TriMesh) -> Result<()> {
+    write_ply_with_colours(path, mesh, None, "bronchosim lumen mesh, world mm (RAS+)")
+}
+
+/// [`write_ply`] with an optional float `red green blue` per vertex (e.g. linear albedo in
+/// [0, 1]) after the normals, and the header comment `comment`. [`read_ply`] reads the
+/// geometry back (it skips the extra properties).
+pub fn write_ply_with_colours(
+    path: &Path,
+    mesh: &TriMesh,
+    colours: Option<&[[f32; 3]]>,
+    comment: &str,
+) -> Result<()> {
     check_mesh(path, mesh, None)?;
+    if let Some(c) = colours {
+        if c.len() != mesh.positions.len() {
+            return Err(Error::invalid(
+                path,
+                format!("{} colours for {} vertices", c.len(), mesh.positions.len()),
+            ));
+        }
+    }
     let normals = mesh.vertex_normals();
+    let colour_props = if colours.is_some() {
+        "property float red\nproperty float green\nproperty float blue\n"
+    } else {
+        ""
+    };
     write_atomic(path, |w| {
         write!(
             w,
-            "ply\nformat binary_little_endian 1.0\ncomment bronchosim lumen mesh, world mm (RAS+)\n\
+            "ply\nformat binary_little_endian 1.0\ncomment {comment}\n\
              element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
-             property float nx\nproperty float ny\nproperty float nz\n\
+             property float nx\nproperty float ny\nproperty float nz\n{colour_props}\
              element face {}\nproperty list uchar uint vertex_indices\nend_header\n",
             mesh.positions.len(),
             mesh.triangles.len()
         )?;
-        for (p, n) in mesh.positions.iter().zip(&normals) {
+        for (i, (p, n)) in mesh.positions.iter().zip(&normals).enumerate() {
             for v in [p.x, p.y, p.z, n.x, n.y, n.z] {
                 w.write_all(&v.to_le_bytes())?;
+            }
+            if let Some(c) = colours {
+                for v in c[i] {
+                    w.write_all(&v.to_le_bytes())?;
+                }
             }
         }
         for t in &mesh.triangles {

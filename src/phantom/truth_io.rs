@@ -1,8 +1,8 @@
 //! Writers for the phantom's truth files: the per-vertex albedo PLY and the single-channel and
 //! linear 16-bit PNGs of the novel views.
 
-use crate::io::atomic::write_atomic;
 use crate::io::frames::Frame;
+use crate::io::mesh_export::write_ply_with_colours;
 use crate::mesh::TriMesh;
 use crate::{Error, Result};
 use std::path::Path;
@@ -11,42 +11,12 @@ use std::path::Path;
 /// lumen), `red green blue` (float, linear albedo in [0, 1]); faces `list uchar uint`.
 /// [`crate::io::mesh_export::read_ply`] reads its geometry (it skips the extra properties).
 pub fn write_albedo_ply(path: &Path, mesh: &TriMesh, albedo: &[[f32; 3]]) -> Result<()> {
-    if albedo.len() != mesh.positions.len() {
-        return Err(Error::invalid(
-            path,
-            format!(
-                "{} albedo values for {} vertices",
-                albedo.len(),
-                mesh.positions.len()
-            ),
-        ));
-    }
-    let normals = mesh.vertex_normals();
-    write_atomic(path, |w| {
-        write!(
-            w,
-            "ply\nformat binary_little_endian 1.0\n\
-             comment bronchosim phantom truth: lumen mesh (world mm, RAS+) with linear RGB albedo\n\
-             element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
-             property float nx\nproperty float ny\nproperty float nz\n\
-             property float red\nproperty float green\nproperty float blue\n\
-             element face {}\nproperty list uchar uint vertex_indices\nend_header\n",
-            mesh.positions.len(),
-            mesh.triangles.len()
-        )?;
-        for ((p, n), a) in mesh.positions.iter().zip(&normals).zip(albedo) {
-            for v in [p.x, p.y, p.z, n.x, n.y, n.z, a[0], a[1], a[2]] {
-                w.write_all(&v.to_le_bytes())?;
-            }
-        }
-        for t in &mesh.triangles {
-            w.write_all(&[3u8])?;
-            for v in t {
-                w.write_all(&v.to_le_bytes())?;
-            }
-        }
-        Ok(())
-    })
+    write_ply_with_colours(
+        path,
+        mesh,
+        Some(albedo),
+        "bronchosim phantom truth: lumen mesh (world mm, RAS+) with linear RGB albedo",
+    )
 }
 
 fn write_png_raw(
