@@ -73,6 +73,9 @@ pub struct BuildOptions {
     pub calibrated: CalibratedOptions,
     /// Pooling of the calibrated fit's samples.
     pub pool: PoolOptions,
+    /// Most samples pooled over the whole video (fewer per frame for long videos; at least
+    /// 1000 per frame).
+    pub max_pooled_samples: usize,
     /// Rounds of correcting the calibrated light's gains against a texture fused with them.
     pub refine_gains: usize,
     /// Hold out every k-th frame for the cross-validation (0: no cross-validation).
@@ -112,6 +115,7 @@ impl Default for BuildOptions {
             // held-out frames, and it trades with s(theta) (cone error 1.7% -> 6.6% RMS).
             calibrated: CalibratedOptions::default(),
             pool: PoolOptions::default(),
+            max_pooled_samples: 4_000_000,
             refine_gains: 1,
             cross_validate_every: 5,
             cross_validate_max_frames: 24,
@@ -228,6 +232,14 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     let cos_theta = cos_theta_of(&rays);
     let mut pooled = PooledSamples::default();
     let mut cache = DepthCache::new(n, opts.depth_cache_bytes);
+    // The pooled fit's memory and time grow with its samples: a long video keeps fewer per frame.
+    let pool = PoolOptions {
+        max_per_frame: opts
+            .pool
+            .max_per_frame
+            .min((opts.max_pooled_samples / n.max(1)).max(1000)),
+        ..opts.pool.clone()
+    };
     for (i, frame) in case.frame_source()?.enumerate() {
         let frame = frame?;
         let pose = &case.poses[i].camera_to_world;
@@ -246,7 +258,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
                 rgb: &frame.rgb,
                 texel: None,
             };
-            pooled.append(pool_frames(&[data], &opts.pool)?)?;
+            pooled.append(pool_frames(&[data], &pool)?)?;
         }
         cache.offer(i, &g.z);
         if i % report_every == 0 && report_frames.len() < 3 {
