@@ -9,6 +9,9 @@
 #![allow(dead_code)]
 #![allow(clippy::needless_range_loop)]
 
+#[path = "../common/physics.rs"]
+mod physics;
+use physics::{brdf_cos, srgb_decode, srgb_encode};
 use std::f64::consts::PI;
 
 #[path = "../common/rng.rs"]
@@ -44,31 +47,6 @@ pub fn albedo(z: f64, phi: f64, slow_amplitude: f64) -> [f64; 3] {
     let vessel = v1 < 0.07 || v2 < 0.05;
     let tint = if vessel { [0.55, 0.30, 0.38] } else { [1.0; 3] };
     std::array::from_fn(|c| BASE_ALBEDO[c] * slow * tint[c])
-}
-
-/// Lambert (per unit albedo) and GGX specular for a light at the eye, both times the cosine.
-fn brdf_cos(gamma: f64) -> (f64, f64) {
-    let a2: f64 = 0.3 * 0.3;
-    let d = a2 / (PI * (gamma * gamma * (a2 - 1.0) + 1.0).powi(2));
-    let g1 = 2.0 * gamma / (gamma + (a2 + (1.0 - a2) * gamma * gamma).sqrt());
-    let spec = 0.025 * d * g1 * g1 / (4.0 * gamma * gamma);
-    (gamma / PI, spec * gamma)
-}
-
-fn srgb_encode(x: f64) -> f64 {
-    if x <= 0.0031308 {
-        12.92 * x
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    }
-}
-
-fn srgb_decode(x: f64) -> f64 {
-    if x <= 0.04045 {
-        x / 12.92
-    } else {
-        ((x + 0.055) / 1.055).powf(2.4)
-    }
 }
 
 /// A camera pose: eye (mm) and camera → world rotation (columns = camera x, y, z axes).

@@ -4,7 +4,10 @@
 //! variation and darker vessel lines; auto-gain, sensor noise, clipping at 1 and 8-bit sRGB
 //! quantisation. Geometry (gamma, z per pixel) is exact up to the root finder (1e-6 mm).
 
+#[path = "../common/physics.rs"]
+mod physics;
 use super::Rng;
+use physics::{brdf_cos, srgb_decode, srgb_encode};
 use std::f64::consts::PI;
 
 /// One rendered frame, per-pixel slices in the layout `extract_samples` takes.
@@ -71,34 +74,6 @@ fn albedo(p: [f64; 3]) -> [f64; 3] {
 
 /// Mean albedo, for the true-shading reference.
 const MEAN_ALBEDO: [f64; 3] = [0.78, 0.40, 0.34];
-
-/// GGX specular + Lambert for a co-located light: N·L = N·V = N·H = gamma, V·H = 1.
-/// Returns (diffuse factor per unit albedo, specular) times the cosine.
-fn brdf_cos(gamma: f64) -> (f64, f64) {
-    let alpha: f64 = 0.3;
-    let a2 = alpha * alpha;
-    let d = a2 / (PI * (gamma * gamma * (a2 - 1.0) + 1.0).powi(2));
-    let g1 = 2.0 * gamma / (gamma + (a2 + (1.0 - a2) * gamma * gamma).sqrt());
-    let f0 = 0.025;
-    let spec = f0 * d * g1 * g1 / (4.0 * gamma * gamma);
-    (gamma / PI, spec * gamma)
-}
-
-fn srgb_encode(x: f64) -> f64 {
-    if x <= 0.0031308 {
-        12.92 * x
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    }
-}
-
-fn srgb_decode(x: f64) -> f64 {
-    if x <= 0.04045 {
-        x / 12.92
-    } else {
-        ((x + 0.055) / 1.055).powf(2.4)
-    }
-}
 
 /// Render a `size` x `size` frame from a camera at `eye` (world mm), looking along `forward`
 /// (tilted off the tube axis), 100-degree field of view; `seed` drives the noise.

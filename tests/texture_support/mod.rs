@@ -10,6 +10,9 @@
 #[path = "../common/airway_mesh.rs"]
 pub mod airway_mesh;
 
+#[path = "../common/physics.rs"]
+mod physics;
+use physics::brdf_cos;
 use std::f64::consts::PI;
 
 use bronchosim::camera::Camera;
@@ -38,16 +41,6 @@ pub fn albedo(p: [f64; 3]) -> [f64; 3] {
     let vessel = v1 < 0.12 || v2 < 0.1;
     let tint = if vessel { [0.5, 0.28, 0.36] } else { [1.0; 3] };
     std::array::from_fn(|c| base[c] * slow * tint[c])
-}
-
-/// GGX specular + Lambert for a co-located light, times the cosine: (diffuse per unit albedo,
-/// specular).
-fn brdf_cos(gamma: f64) -> (f64, f64) {
-    let a2: f64 = 0.3 * 0.3;
-    let d = a2 / (PI * (gamma * gamma * (a2 - 1.0) + 1.0).powi(2));
-    let g1 = 2.0 * gamma / (gamma + (a2 + (1.0 - a2) * gamma * gamma).sqrt());
-    let spec = 0.025 * d * g1 * g1 / (4.0 * gamma * gamma);
-    (gamma / PI, spec * gamma)
 }
 
 /// A tiny deterministic generator (64-bit LCG + Box–Muller), so failures reproduce.
