@@ -71,6 +71,9 @@ pub struct BuildOptions {
     pub shading: ShadingChoice,
     /// The calibrated light fit.
     pub calibrated: CalibratedOptions,
+    /// The frame whose gain is 1 in the calibrated light (`None`: the middle frame;
+    /// `calibrated.reference_frame` is ignored).
+    pub calibrated_reference: Option<usize>,
     /// Pooling of the calibrated fit's samples.
     pub pool: PoolOptions,
     /// Most samples pooled over the whole video (fewer per frame for long videos; at least
@@ -114,6 +117,7 @@ impl Default for BuildOptions {
             // frames) it gained 0.5 dB on the truth views but lost 0.3 dB / gained 0.15 dB on
             // held-out frames, and it trades with s(theta) (cone error 1.7% -> 6.6% RMS).
             calibrated: CalibratedOptions::default(),
+            calibrated_reference: None,
             pool: PoolOptions::default(),
             max_pooled_samples: 4_000_000,
             refine_gains: 1,
@@ -283,7 +287,14 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         None
     } else {
         let density = density_weights_3d(&pooled, &WeightOptions::default());
-        match fit_calibrated(&pooled, &density, &opts.calibrated) {
+        // The reference gain (g = 1, the exposure new views are rendered at): the middle frame
+        // unless set, because a frame mid-video shares the most surface with the others (the
+        // first frame sees the cut top of the trachea, which no other frame sees).
+        let cal_opts = CalibratedOptions {
+            reference_frame: opts.calibrated_reference.unwrap_or(n / 2).min(n - 1),
+            ..opts.calibrated.clone()
+        };
+        match fit_calibrated(&pooled, &density, &cal_opts) {
             Ok(fit) => Some(fit.model),
             Err(e) if opts.shading == ShadingChoice::Calibrated => {
                 return Err(Error::Other(format!("calibrated light fit: {e}")))
