@@ -195,13 +195,14 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
         theta_edge.to_degrees()
     );
     assert!(cone_rms < 0.05, "cone RMS {cone_rms}");
-    // Issue 8 aims at 2% per gain; measured here (24 frames): relative to frame 0 worst 8.5%,
-    // RMS 6.0%; with the global scale fitted worst 7.5%, RMS 3.5%. Under the uniform-albedo
-    // fit each frame's gain absorbs the mean albedo of the mucosa it sees (vessels, pale
-    // patches); one correction against the fused texture (workflow::gain_refine) halves the
-    // frame-to-frame part but frame 0, seen by few other frames, stays uncertain. The bounds
-    // pin today's level so a regression shows.
-    assert!(rms_gain < 0.07, "gain RMS error {rms_gain}");
+    // Issue 8 aims at 2% per gain; measured here (24 frames, reference = the middle frame):
+    // worst 9.8%, RMS 4.1%; with the global scale fitted worst 7.5%, RMS 3.5%. Under the
+    // uniform-albedo fit each frame's gain absorbs the mean albedo of the mucosa it sees
+    // (vessels, pale patches); one correction against the fused texture
+    // (workflow::gain_refine) halves the frame-to-frame part, but the first and last frames,
+    // which share little surface with the others, stay uncertain. The bounds pin today's
+    // level so a regression shows.
+    assert!(rms_gain < 0.055, "gain RMS error {rms_gain}");
     assert!(
         rms_scaled < 0.045,
         "gain RMS error, global scale fitted: {rms_scaled}"
