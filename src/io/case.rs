@@ -5,12 +5,13 @@ use crate::camera::Camera;
 use crate::io::camera_file::{find_camera, read_camera};
 use crate::io::ct::{find_ct, read_ct, CtInfo, CtSource};
 use crate::io::frame_source::FrameSource;
+use crate::io::frames::Frame;
 use crate::io::poses::{read_poses, FrameRef, PoseEntry};
 use crate::io::video::VideoReader;
 use crate::volume::Volume;
 use crate::{Error, Result};
 use rayon::prelude::*;
-use std::collections::HashSet;
+use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 
 /// Video containers accepted as `video.<ext>` (anything ffmpeg reads would do; these are
@@ -113,6 +114,31 @@ impl Case {
     /// Number of frames (= number of poses, checked by [`Case::open`]).
     pub fn frame_count(&self) -> usize {
         self.poses.len()
+    }
+
+    /// The frames whose indices are in `wanted`, decoded in one pass over the frame source
+    /// (stopping after the last wanted one); keyed by index.
+    pub fn frames_at(&self, wanted: &[usize]) -> Result<BTreeMap<usize, Frame>> {
+        let mut out = BTreeMap::new();
+        let Some(last) = wanted.iter().copied().max() else {
+            return Ok(out);
+        };
+        for (i, f) in self.frame_source()?.enumerate() {
+            if i > last {
+                break;
+            }
+            let f = f?;
+            if wanted.contains(&i) {
+                out.insert(i, f);
+            }
+        }
+        if let Some(w) = wanted.iter().find(|w| !out.contains_key(w)) {
+            return Err(Error::invalid(
+                &self.poses_path,
+                format!("frame {w} could not be read from the frame source"),
+            ));
+        }
+        Ok(out)
     }
 
     /// The frames in poses order, streamed one at a time.

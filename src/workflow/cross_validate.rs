@@ -120,25 +120,19 @@ pub fn cross_validate(
     let train: Vec<usize> = (0..n).filter(|i| !held.contains(i)).collect();
     // The held-out frames and the pixels of each that obey the model.
     let mut frames: Vec<(usize, Frame, Vec<bool>)> = Vec::with_capacity(held.len());
-    for (i, f) in inp.case.frame_source()?.enumerate() {
-        if i > *held.last().expect("not empty") {
-            break;
-        }
-        let f = f?;
-        if held.contains(&i) {
-            let g = cast_frame_with(inp.scene, inp.rays, &inp.case.poses[i].camera_to_world);
-            let s = inp.samples;
-            let mask = (0..g.z.len())
-                .map(|p| {
-                    let px = &f.rgb[3 * p..3 * p + 3];
-                    g.hit(p)
-                        && g.gamma[p] >= s.min_gamma
-                        && px.iter().all(|&v| v < s.saturation_level)
-                        && px.iter().any(|&v| v >= s.noise_floor)
-                })
-                .collect();
-            frames.push((i, f, mask));
-        }
+    for (i, f) in inp.case.frames_at(&held)? {
+        let g = cast_frame_with(inp.scene, inp.rays, &inp.case.poses[i].camera_to_world);
+        let s = inp.samples;
+        let mask = (0..g.z.len())
+            .map(|p| {
+                let px = &f.rgb[3 * p..3 * p + 3];
+                g.hit(p)
+                    && g.gamma[p] >= s.min_gamma
+                    && px.iter().all(|&v| v < s.saturation_level)
+                    && px.iter().any(|&v| v >= s.noise_floor)
+            })
+            .collect();
+        frames.push((i, f, mask));
     }
     let train_psi: Vec<PsiModel> = train.iter().map(|&i| inp.psi[i].clone()).collect();
     let index = ViewpointIndex::new(&train_psi);

@@ -100,16 +100,7 @@ pub fn novel_figure(model: &Model, case: &Case) -> Result<NewViewsFigure> {
     let inputs = model.render_inputs();
     let mut wanted: Vec<usize> = picks.clone();
     wanted.dedup();
-    let mut frames = std::collections::BTreeMap::new();
-    for (i, f) in case.frame_source()?.enumerate() {
-        if i > *wanted.last().unwrap_or(&0) {
-            break;
-        }
-        let f = f?;
-        if wanted.contains(&i) {
-            frames.insert(i, f);
-        }
-    }
+    let mut frames = case.frames_at(&wanted)?;
     let mut rows = Vec::new();
     for &i in &wanted {
         let (a, b) = (

@@ -5,8 +5,9 @@
 
 use crate::io::frames::{write_png_srgb8, Frame};
 use crate::model::ModelManifest;
-use crate::raycast::GBuffer;
+use crate::raycast::{GBuffer, RayTable};
 use crate::shading::calibrated_plots::{plot_gains, plot_light_profile, plot_rho};
+use crate::shading::calibrated_predict::cos_theta_of;
 use crate::shading::frame_shading::FrameShading;
 use crate::shading::plots::{plot_psi_slices, plot_samples_density};
 use crate::shading::psi::PsiModel;
@@ -319,16 +320,7 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
     // Fig. 2 and Fig. 3 for a few frames.
     html.push_str("<h2>Shading fit (paper Fig. 2) and de-lighting (paper Fig. 3)</h2>");
     // cos theta of every pixel's ray (the calibrated light's angular profile).
-    let cam = &m.camera;
-    let cos_theta: Vec<f32> = (0..cam.width as usize * cam.height as usize)
-        .map(|i| {
-            let (u, v) = (
-                (i % cam.width as usize) as f64,
-                (i / cam.width as usize) as f64,
-            );
-            cam.pixel_ray(u, v).z as f32
-        })
-        .collect();
+    let cos_theta = cos_theta_of(&RayTable::new(&m.camera));
     for f in inputs.frames {
         let _ = write!(html, "<h3>Frame {}</h3>", f.index);
         let dens = tmp.path().join(format!("dens{}.png", f.index));

@@ -6,13 +6,11 @@
 //! `cos(gamma) / z²`. Used by `bronchosim evaluate --baselines` and by `build --truth`
 //! (report Fig. 4).
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
 use crate::camera::Camera;
 use crate::io::camera_file::read_camera;
 use crate::io::case::Case;
-use crate::io::frames::Frame;
 use crate::model::Model;
 use crate::render::views_io::load_truth;
 use crate::render::{
@@ -52,33 +50,6 @@ pub fn truth_camera(truth_dir: &Path) -> Result<Camera> {
         return Err(Error::missing(&p, "the camera of the reference views"));
     }
     read_camera(&p)
-}
-
-/// Decode the frames of `case` whose indices are in `wanted` (one pass over the frame source).
-fn frames_at(case: &Case, wanted: &[usize]) -> Result<BTreeMap<usize, Frame>> {
-    let mut out = BTreeMap::new();
-    let last = wanted.iter().copied().max();
-    let Some(last) = last else {
-        return Ok(out);
-    };
-    for (i, f) in case.frame_source()?.enumerate() {
-        if i > last {
-            break;
-        }
-        let f = f?;
-        if wanted.contains(&i) {
-            out.insert(i, f);
-        }
-    }
-    for &w in wanted {
-        if !out.contains_key(&w) {
-            return Err(Error::invalid(
-                &case.poses_path,
-                format!("frame {w} could not be read from the frame source"),
-            ));
-        }
-    }
-    Ok(out)
 }
 
 /// Render the methods for every view of `truth_dir` and score them; `rendered` (e.g. a folder
@@ -125,7 +96,7 @@ pub fn evaluate_against_truth(
                 .ok_or_else(|| Error::invalid(&case.poses_path, "no training frames"))
         })
         .collect::<Result<_>>()?;
-    let frames = frames_at(case, &near)?;
+    let frames = case.frames_at(&near)?;
     let reprojected = views
         .iter()
         .zip(&near)
