@@ -1,5 +1,6 @@
 //! The lumen surface from a CT and an airway mask: marching cubes on the CT intensities inside
-//! a dilation of the mask, Taubin smoothing, decimation, with counts and deviations per step.
+//! a dilation of the mask, Taubin smoothing, projection back onto the CT's iso-surface,
+//! decimation, with counts and deviations per step.
 
 use std::time::Instant;
 
@@ -9,6 +10,7 @@ use super::decimate::{decimate, DecimateOptions, DecimateReport};
 use super::metrics::{deviation, mesh_stats, Deviation, MeshStats};
 use super::smooth::{taubin, TaubinOptions};
 use super::TriMesh;
+use crate::math::{Point3, Vector3};
 use crate::volume::region_grow::flood_fill;
 use crate::volume::{marching_cubes, Volume};
 use crate::{Error, Result};
@@ -24,6 +26,10 @@ pub struct LumenMeshOptions {
     pub region_dilation_mm: f64,
     /// Taubin smoothing (0 iterations to skip).
     pub taubin: TaubinOptions,
+    /// After smoothing, move each vertex along its normal onto the CT's iso-surface if a
+    /// crossing lies within this distance (mm); 0 to skip. See [`snap_to_iso`].
+    #[serde(default)]
+    pub iso_snap_mm: f64,
     /// Decimation (target edge 0.7 mm by default).
     pub decimate: DecimateOptions,
     /// Skip decimation (keep the smoothed marching-cubes mesh).
@@ -31,12 +37,14 @@ pub struct LumenMeshOptions {
 }
 
 impl Default for LumenMeshOptions {
-    /// −500 HU, 2 mm dilation, Taubin 10 × (0.5, −0.53), 0.7 mm target edge.
+    /// −500 HU, 2 mm dilation, Taubin 10 × (0.5, −0.53), iso snap within 0.5 mm, 0.7 mm
+    /// target edge.
     fn default() -> Self {
         LumenMeshOptions {
             iso_hu: -500.0,
             region_dilation_mm: 2.0,
             taubin: TaubinOptions::default(),
+            iso_snap_mm: 0.5,
             decimate: DecimateOptions::default(),
             skip_decimation: false,
         }
@@ -52,7 +60,7 @@ pub struct MeshReport {
     pub smoothed: MeshStats,
     /// After decimation (equal to `smoothed` when skipped).
     pub decimated: MeshStats,
-    /// Smoothing's deviation: smoothed vertices → marching-cubes surface (mm).
+    /// Smoothing's (and the iso snap's) deviation: smoothed vertices → marching-cubes surface (mm).
     pub smoothing_deviation: Deviation,
     /// Decimation's deviation: smoothed vertices → decimated surface (mm). (The other direction is
     /// zero: meshopt keeps a subset of the input vertices in place.)
@@ -133,6 +141,9 @@ pub fn lumen_mesh_in_region(
     let mut smooth = mc.clone();
     if opts.taubin.iterations > 0 {
         taubin(&mut smooth, &opts.taubin)?;
+    }
+    if opts.iso_snap_mm > 0.0 {
+        snap_to_iso(&mut smooth, ct, opts.iso_hu, opts.iso_snap_mm);
     }
     report.seconds[1] = t.elapsed().as_secs_f64();
     report.smoothed = mesh_stats(&smooth);
@@ -229,6 +240,55 @@ fn dilate_strided(i: &[u8], o: &mut [u8], x: usize, stride: usize, n: usize, r: 
         }
         o[x + j * stride] = (count > 0) as u8;
     }
+}
+
+/// Move each vertex of `mesh` along its (area-weighted) normal to the nearest crossing of
+/// `iso` by the trilinearly interpolated `ct` within `reach` mm on either side (vertices with
+/// no crossing in reach stay where they are).
+///
+/// Taubin smoothing removes the marching-cubes facets, but as a low-pass filter on the mesh it
+/// also flattens relief the CT does resolve: the cartilage rings of the trachea (about 4 mm
+/// apart, a few tenths of a mm deep) become shallower, and the shading they cause is then
+/// baked into the texture as stripes. Projecting back keeps the smoothing's tangential
+/// regularisation (vertex spacing, triangle shapes) and puts the surface where the CT says.
+/// Measured on the default phantom (80 frames, `examples/albedo_error.rs`): albedo error of
+/// the fused texture 11.6% -> 10.5%, new views +0.05 dB.
+pub fn snap_to_iso(mesh: &mut TriMesh, ct: &Volume<f32>, iso: f32, reach: f64) {
+    let normals = mesh.vertex_normals();
+    // Steps of at most 1/16 of the reach along the normal, searched outwards from the vertex.
+    const STEPS: usize = 16;
+    let h = reach / STEPS as f64;
+    let moved: Vec<Point3<f32>> = mesh
+        .positions
+        .par_iter()
+        .zip(normals.par_iter())
+        .map(|(p, n)| {
+            let p0 = Point3::new(p.x as f64, p.y as f64, p.z as f64);
+            let n0 = Vector3::new(n.x as f64, n.y as f64, n.z as f64);
+            // A NaN normal samples no CT (the vertex stays).
+            if n0.norm() < 0.5 {
+                return *p;
+            }
+            let at = |t: f64| ct.sample_world(p0 + n0 * t).map(|v| v - iso);
+            let Some(f0) = at(0.0) else { return *p };
+            let mut prev = [f0, f0];
+            for k in 0..STEPS {
+                for (side, dir) in [1.0, -1.0].into_iter().enumerate() {
+                    let (a, b) = (dir * (k as f64) * h, dir * (k + 1) as f64 * h);
+                    let Some(fb) = at(b) else { continue };
+                    let fa = prev[side];
+                    prev[side] = fb;
+                    if (fa <= 0.0) != (fb <= 0.0) {
+                        let t = a + (b - a) * f64::from(fa / (fa - fb));
+                        let q = p0 + n0 * t;
+                        return Point3::new(q.x as f32, q.y as f32, q.z as f32);
+                    }
+                }
+            }
+            *p
+        })
+        .collect();
+    mesh.positions = moved;
 }
 
 #[cfg(test)]
