@@ -2,7 +2,7 @@
 //! `render` writes the truth views from the model folder, `evaluate --baselines` scores them
 //! next to the paper's method and the two baselines on the same pixels.
 
-use std::path::Path;
+use bronchosim::workflow::albedo_truth::albedo_error;
 
 #[path = "common/cli.rs"]
 mod cli;
@@ -242,85 +242,6 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
     assert!(err.contains("model.json"), "{err}");
 }
 
-/// A 16-bit PNG's samples, raw (no sRGB decoding): (width, height, samples per pixel, codes).
-fn read_png16_raw(path: &Path) -> (u32, u32, usize, Vec<u16>) {
-    let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let mut r = dec.read_info().unwrap();
-    let mut buf = vec![0u8; r.output_buffer_size().unwrap()];
-    let info = r.next_frame(&mut buf).unwrap();
-    assert_eq!(info.bit_depth, png::BitDepth::Sixteen, "{}", path.display());
-    let codes = buf[..info.buffer_size()]
-        .chunks_exact(2)
-        .map(|b| u16::from_be_bytes([b[0], b[1]]))
-        .collect();
-    (info.width, info.height, info.color_type.samples(), codes)
-}
-
-/// Relative RMS error of a model texture against the phantom's true albedo, seen through the
-/// truth views: per view, the texture alone is rendered from the model (albedo only) and the
-/// true albedo at each pixel-centre hit is read from `NNNNNN_albedo.png` (linear, code/65535).
-/// Pixels count where both see the same surface (depths within 0.3 mm + 2%, truth depth from
-/// `NNNNNN_depth.png`, code/100 mm) and a frame saw the texel (the model's coverage.png). One
-/// least-squares scale per channel (the texture is relative), then
-/// `sqrt(sum (k r - t)^2 / sum t^2)`, averaged over channels. Returns (error, pixels).
-fn albedo_error(
-    model: &bronchosim::model::Model,
-    texture: &bronchosim::render::MipTexture,
-    truth_dir: &Path,
-) -> (f64, usize) {
-    use bronchosim::render::{read_views, render_view, MipOptions, MipTexture, RenderInputs};
-    let camera = bronchosim::io::camera_file::read_camera(&truth_dir.join("camera.json")).unwrap();
-    let views = read_views(&truth_dir.join("views.json"), truth_dir).unwrap();
-    let cov_png = bronchosim::io::frames::read_png(&model.dir.join("coverage.png")).unwrap();
-    let opts0 = MipOptions { max_level: 0 };
-    let coverage = MipTexture::new(&cov_png, None, model.manifest.texel_mm, &opts0).unwrap();
-    let opts = bronchosim::render::RenderOptions {
-        albedo_only: true,
-        mipmap: false,
-        ..Default::default()
-    };
-    let with = |t| RenderInputs {
-        texture: t,
-        ..model.render_inputs()
-    };
-    let (mut tr, mut rr, mut tt) = ([0f64; 3], [0f64; 3], [0f64; 3]);
-    let mut pairs: Vec<([f32; 3], [f32; 3])> = Vec::new();
-    for v in &views {
-        let (alb, hit) = render_view(&with(texture), &camera, &v.camera_to_world, &opts).unwrap();
-        let (cov, _) = render_view(&with(&coverage), &camera, &v.camera_to_world, &opts).unwrap();
-        let g = bronchosim::raycast::cast_frame(&model.scene, &camera, &v.camera_to_world);
-        let stem = v.path.with_extension("").to_string_lossy().into_owned();
-        let (_, _, ch, truth) = read_png16_raw(Path::new(&format!("{stem}_albedo.png")));
-        assert_eq!(ch, 3);
-        let (_, _, _, zt) = read_png16_raw(Path::new(&format!("{stem}_depth.png")));
-        for i in 0..hit.len() {
-            let (z, t) = (g.z[i], zt[i] as f32 / 100.0);
-            if !(hit[i] && t > 0.0 && cov.rgb[3 * i] >= 0.999 && (z - t).abs() < 0.3 + 0.02 * t) {
-                continue;
-            }
-            let a: [f32; 3] = std::array::from_fn(|c| alb.rgb[3 * i + c]);
-            let b: [f32; 3] = std::array::from_fn(|c| truth[3 * i + c] as f32 / 65535.0);
-            for c in 0..3 {
-                tr[c] += (a[c] * b[c]) as f64;
-                rr[c] += (a[c] * a[c]) as f64;
-                tt[c] += (b[c] * b[c]) as f64;
-            }
-            pairs.push((a, b));
-        }
-    }
-    let k: [f64; 3] = std::array::from_fn(|c| tr[c] / rr[c]);
-    let err = (0..3)
-        .map(|c| {
-            let e: f64 = pairs
-                .iter()
-                .map(|(a, b)| (k[c] * a[c] as f64 - b[c] as f64).powi(2))
-                .sum();
-            (e / tt[c]).sqrt() / 3.0
-        })
-        .sum();
-    (err, pairs.len())
-}
-
 /// Issue 6 on the phantom: the fused albedo against the true albedo, for the model's texture
 /// (de-lit with the calibrated light) and the paper's (de-lit with each frame's Psi).
 #[test]
@@ -331,12 +252,14 @@ fn fused_albedo_matches_the_phantom_truth() {
     ok(&run(&["build", "case", "--out", "model", "--quiet"], dir));
     let model = bronchosim::model::Model::load(&dir.join("model")).unwrap();
     let truth = dir.join("case/truth");
-    let (cal, n) = albedo_error(&model, &model.texture, &truth);
+    let cal = albedo_error(&model, &model.texture, &truth).unwrap();
+    let n = cal.pixels;
+    let cal = cal.relative_rms;
     let paper = model
         .paper_texture
         .as_ref()
         .expect("a calibrated model keeps the paper's texture");
-    let (pap, _) = albedo_error(&model, paper, &truth);
+    let pap = albedo_error(&model, paper, &truth).unwrap().relative_rms;
     println!(
         "fused albedo vs truth over {n} pixels of the truth views: calibrated {:.1}%, paper \
          {:.1}% relative RMS",
@@ -344,9 +267,10 @@ fn fused_albedo_matches_the_phantom_truth() {
         100.0 * pap
     );
     assert!(n > 20_000, "{n} pixels compared");
-    // Issue 6 aims at 10%; measured with the default weighted-average fusion: 12.5%
-    // (calibrated) and 13.9% (paper); with max-weight fusion 11.7% and 15.2%. The bound pins
-    // today's level; the calibrated light must keep beating the paper's Psi.
-    assert!(cal < 0.135, "calibrated {cal}");
+    // Issue 6 aims at 10%; measured with the default weighted-average fusion: 11.3%
+    // (calibrated) and 13.1% (paper) since the mesh keeps the CT's ring relief (12.4% and
+    // 13.9% before). The bound pins today's level; the calibrated light must keep beating the
+    // paper's Psi.
+    assert!(cal < 0.12, "calibrated {cal}");
     assert!(cal < pap, "{cal} vs {pap}");
 }

@@ -1,6 +1,7 @@
 //! The commands a person runs, each a whole job from input folder to output folder:
 //! they chain the stages and write results atomically. `main.rs` only parses and calls these.
 
+pub mod albedo_truth;
 pub mod build;
 pub mod build_frames;
 pub mod cross_validate;
