@@ -66,6 +66,20 @@ fn ct_volume(
     v
 }
 
+/// The airway mask of a CT made by `ct_volume`: voxels half a millimetre inside the lumen.
+fn airway_mask(ct: &Volume<f32>, sdf: impl Fn(&Point3<f64>) -> f64) -> Volume<u8> {
+    let mut mask = Volume::filled(ct.dims, ct.affine, 0u8);
+    for k in 0..ct.dims[2] {
+        for j in 0..ct.dims[1] {
+            for i in 0..ct.dims[0] {
+                let w = ct.index_to_world(Point3::new(i as f64, j as f64, k as f64));
+                mask.set(i, j, k, (sdf(&w) < -0.5) as u8);
+            }
+        }
+    }
+    mask
+}
+
 /// World position of the grid's centre.
 fn grid_centre(dims: [usize; 3], a: Affine) -> Point3<f64> {
     let v = Volume::filled(dims, a, 0u8);
@@ -427,15 +441,7 @@ fn lumen_pipeline_on_a_tube_phantom_meets_the_accuracy_bound() {
             }
         }
     }
-    let mut mask = Volume::filled(dims, a, 0u8);
-    for k in 0..dims[2] {
-        for j in 0..dims[1] {
-            for i in 0..dims[0] {
-                let w = ct.index_to_world(Point3::new(i as f64, j as f64, k as f64));
-                mask.set(i, j, k, (sdf(&w) < -0.5) as u8);
-            }
-        }
-    }
+    let mask = airway_mask(&ct, sdf);
     let opts = LumenMeshOptions {
         region_dilation_mm: 1.5,
         ..Default::default()
@@ -594,15 +600,7 @@ fn iso_snap_keeps_the_ring_relief_that_smoothing_flattens() {
     // Positive in the wall: distance beyond the ringed radius.
     let sdf = |p: &Point3<f64>| radial(p) - (r0 + amp * (k * axial(p)).cos());
     let ct = ct_volume(dims, a, sdf, 20.0, 11);
-    let mut mask = Volume::filled(dims, a, 0u8);
-    for kk in 0..dims[2] {
-        for j in 0..dims[1] {
-            for i in 0..dims[0] {
-                let w = ct.index_to_world(Point3::new(i as f64, j as f64, kk as f64));
-                mask.set(i, j, kk, (sdf(&w) < -0.5) as u8);
-            }
-        }
-    }
+    let mask = airway_mask(&ct, sdf);
     // Ring amplitude: least squares radial = c + a cos(k s) + b sin(k s) over vertices away
     // from the ends; and the mean distance to the true surface.
     let measure = |snap: f64| {
