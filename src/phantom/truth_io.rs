@@ -1,5 +1,5 @@
-//! Writers for the phantom's truth files: the per-vertex albedo PLY and the single-channel and
-//! linear 16-bit PNGs of the novel views.
+//! Writers for the phantom's truth files (the per-vertex albedo PLY and the single-channel and
+//! linear 16-bit PNGs of the novel views) and the reader of those PNGs.
 
 use crate::io::frames::Frame;
 use crate::io::mesh_export::write_ply_with_colours;
@@ -81,4 +81,30 @@ pub fn write_linear16_png(path: &Path, frame: &Frame) -> Result<()> {
         png::BitDepth::Sixteen,
         &bytes,
     )
+}
+
+/// The raw 16-bit codes of a PNG with `channels` samples per pixel (the truth images written
+/// by [`write_gray16_png`] and [`write_linear16_png`]), row-major, channels interleaved.
+pub fn read_png16(path: &Path, channels: usize) -> Result<Vec<u16>> {
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut r = png::Decoder::new(std::io::BufReader::new(file))
+        .read_info()
+        .map_err(|e| Error::invalid(path, e.to_string()))?;
+    let size = r
+        .output_buffer_size()
+        .ok_or_else(|| Error::invalid(path, "image too large"))?;
+    let mut buf = vec![0u8; size];
+    let info = r
+        .next_frame(&mut buf)
+        .map_err(|e| Error::invalid(path, e.to_string()))?;
+    if info.bit_depth != png::BitDepth::Sixteen || info.color_type.samples() != channels {
+        return Err(Error::invalid(
+            path,
+            format!("expected a 16-bit PNG with {channels} channel(s)"),
+        ));
+    }
+    Ok(buf[..info.buffer_size()]
+        .chunks_exact(2)
+        .map(|b| u16::from_be_bytes([b[0], b[1]]))
+        .collect())
 }

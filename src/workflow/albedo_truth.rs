@@ -11,6 +11,7 @@ use std::path::Path;
 
 use crate::io::frames::read_png;
 use crate::model::Model;
+use crate::phantom::truth_io::read_png16;
 use crate::raycast::cast_frame;
 use crate::render::{read_views, render_view, MipOptions, MipTexture, RenderInputs, RenderOptions};
 use crate::workflow::truth_eval::truth_camera;
@@ -96,29 +97,4 @@ pub fn albedo_error(model: &Model, texture: &MipTexture, truth_dir: &Path) -> Re
         relative_rms,
         pixels: pairs.len(),
     })
-}
-
-/// The raw 16-bit codes of a PNG with `channels` samples per pixel.
-fn read_png16(path: &Path, channels: usize) -> Result<Vec<u16>> {
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut r = png::Decoder::new(std::io::BufReader::new(file))
-        .read_info()
-        .map_err(|e| Error::invalid(path, e.to_string()))?;
-    let size = r
-        .output_buffer_size()
-        .ok_or_else(|| Error::invalid(path, "image too large"))?;
-    let mut buf = vec![0u8; size];
-    let info = r
-        .next_frame(&mut buf)
-        .map_err(|e| Error::invalid(path, e.to_string()))?;
-    if info.bit_depth != png::BitDepth::Sixteen || info.color_type.samples() != channels {
-        return Err(Error::invalid(
-            path,
-            format!("expected a 16-bit PNG with {channels} channel(s)"),
-        ));
-    }
-    Ok(buf[..info.buffer_size()]
-        .chunks_exact(2)
-        .map(|b| u16::from_be_bytes([b[0], b[1]]))
-        .collect())
 }
