@@ -37,7 +37,12 @@ fn bench_fusion(c: &mut Criterion) {
             "nms_smoothed_12x320",
             FusionMethod::MaxWeightSmoothed { sigma_texels: 2.0 },
         ),
-        ("weighted_average_12x320", FusionMethod::WeightedAverage),
+        (
+            "weighted_average_12x320",
+            FusionMethod::WeightedAverage {
+                weight_exponent: 2.0,
+            },
+        ),
     ] {
         let opts = FusionOptions {
             method,

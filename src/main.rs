@@ -93,9 +93,14 @@ enum Command {
         #[arg(long, default_value_t = 0.7)]
         edge_mm: f64,
         /// Fusion of the de-lit frames: "max" (the paper's max-weight choice with smoothed
-        /// weights) or "average" (predicted-intensity-weighted average).
+        /// weights) or "average" (weighted by the predicted intensity to the power
+        /// --fusion-weight-exponent).
         #[arg(long, default_value = "average")]
         fusion: String,
+        /// Power of the predicted intensity that weights the average (1: the paper's first
+        /// attempt; 2: inverse-variance weights for intensity errors of constant size).
+        #[arg(long, default_value_t = 2.0)]
+        fusion_weight_exponent: f32,
         /// Shading model of the texture and of new views: "paper" (per-viewpoint Psi),
         /// "calibrated" (one light for the whole video) or "auto" (the one that predicts
         /// held-out frames better).
@@ -297,6 +302,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             texel_mm,
             edge_mm,
             fusion,
+            fusion_weight_exponent,
             shading,
             cross_validate_every,
             ambient,
@@ -323,7 +329,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 "max" => bronchosim::texture::fusion::FusionMethod::MaxWeightSmoothed {
                     sigma_texels: 2.0,
                 },
-                "average" => bronchosim::texture::fusion::FusionMethod::WeightedAverage,
+                "average" if fusion_weight_exponent >= 1.0 => {
+                    bronchosim::texture::fusion::FusionMethod::WeightedAverage {
+                        weight_exponent: fusion_weight_exponent,
+                    }
+                }
+                "average" => anyhow::bail!(
+                    "--fusion-weight-exponent {fusion_weight_exponent}: expected 1 or more"
+                ),
                 other => anyhow::bail!("--fusion {other}: expected max or average"),
             };
             let m = build_model(&case, &out, &opts)

@@ -156,7 +156,12 @@ fn fused_albedo_matches_truth_and_nms_is_sharper() {
         FusionMethod::MaxWeightSmoothed { sigma_texels: 2.0 },
         FRAMES,
     );
-    let avg = run(FusionMethod::WeightedAverage, FRAMES);
+    let avg = run(
+        FusionMethod::WeightedAverage {
+            weight_exponent: 1.0,
+        },
+        FRAMES,
+    );
     // The same texels are covered by both methods (coverage does not depend on the blend).
     assert_eq!(nms.covered, avg.covered);
     let covered = nms.stats.covered_texels;
@@ -225,8 +230,18 @@ fn fusion_state_does_not_grow_with_frames() {
         FusionMethod::MaxWeightSmoothed { sigma_texels: 2.0 },
         FRAMES,
     );
-    let c = run(FusionMethod::WeightedAverage, 4);
-    let d = run(FusionMethod::WeightedAverage, FRAMES);
+    let c = run(
+        FusionMethod::WeightedAverage {
+            weight_exponent: 1.0,
+        },
+        4,
+    );
+    let d = run(
+        FusionMethod::WeightedAverage {
+            weight_exponent: 1.0,
+        },
+        FRAMES,
+    );
     assert_eq!(a.stats.state_bytes, b.stats.state_bytes);
     assert_eq!(c.stats.state_bytes, d.stats.state_bytes);
     assert!(b.stats.covered_texels > a.stats.covered_texels);
@@ -415,7 +430,9 @@ fn diag_thresholds() {
     for thr in [0.0, 0.02, 0.05, 0.1, 0.2] {
         for method in [
             FusionMethod::MaxWeightSmoothed { sigma_texels: 2.0 },
-            FusionMethod::WeightedAverage,
+            FusionMethod::WeightedAverage {
+                weight_exponent: 1.0,
+            },
         ] {
             let mut obs: Vec<Observation> =
                 shots.iter().map(|s| s.observation(&w.camera)).collect();

@@ -1,7 +1,7 @@
 //! Fusion of the de-lit frames into one albedo atlas (paper §2.4), streaming over frames.
 //!
-//! * [`FusionMethod::WeightedAverage`] (the paper's first attempt, blurry): one pass,
-//!   `sum_f w_f v_f / sum_f w_f` with `w_f` the intensity Psi predicts for the texel.
+//! * [`FusionMethod::WeightedAverage`] (the paper's first attempt, blurry, with exponent 1): one
+//!   pass, `sum_f w_f^e v_f / sum_f w_f^e` with `w_f` the intensity Psi predicts for the texel.
 //! * [`FusionMethod::MaxWeightSmoothed`] (the paper's final method): pass 1 keeps per texel
 //!   the largest weight and its frame (non-maximum suppression); the texels are then ordered
 //!   by winning frame; pass 2 re-reads the frames in order, and for frame f blurs its
@@ -34,8 +34,15 @@ pub enum FusionMethod {
         /// Standard deviation of the weight-map smoothing (texels).
         sigma_texels: f32,
     },
-    /// Average weighted by the predicted intensity (paper, first attempt; blurry).
-    WeightedAverage,
+    /// Average weighted by the predicted intensity raised to `weight_exponent`. Exponent 1 is
+    /// the paper's first attempt (blurry). Exponent 2 is the inverse-variance weight when a
+    /// de-lit value's error is an intensity error of constant size divided by the shading
+    /// (read noise, unmodelled inter-reflection, shading errors from the CT mesh's normals):
+    /// close, frontal, well-lit views count more, and the texture is sharper.
+    WeightedAverage {
+        /// Power of the predicted intensity used as the weight (1 or more).
+        weight_exponent: f32,
+    },
 }
 
 impl FusionMethod {
@@ -43,7 +50,7 @@ impl FusionMethod {
     pub fn passes(&self) -> usize {
         match self {
             FusionMethod::MaxWeightSmoothed { .. } => 2,
-            FusionMethod::WeightedAverage => 1,
+            FusionMethod::WeightedAverage { .. } => 1,
         }
     }
 }
@@ -171,11 +178,16 @@ pub fn fuse<S: FrameStream + ?Sized>(
     let mut acc = vec![Acc::default(); n];
     let mut state_bytes = n * (std::mem::size_of::<u32>() + std::mem::size_of::<Acc>());
     match opts.method {
-        FusionMethod::WeightedAverage => {
+        FusionMethod::WeightedAverage { weight_exponent } => {
             for f in 0..nf {
                 let obs = frames.observation(f)?;
                 let ctx = FrameCtx::new(&obs, &opts.delight, cams.angle(obs.camera))?;
                 for_visible_blocks(texels, &ctx, &mut acc, &mut seen, |a, s, v, w| {
+                    let w = match weight_exponent {
+                        1.0 => w,
+                        2.0 => w * w,
+                        e => w.powf(e),
+                    };
                     for ch in 0..3 {
                         a.rgb[ch] += w * v[ch];
                     }
