@@ -267,10 +267,31 @@ fn fused_albedo_matches_the_phantom_truth() {
         100.0 * pap
     );
     assert!(n > 20_000, "{n} pixels compared");
-    // Issue 6 aims at 10%; measured with the default weighted-average fusion: 11.3%
-    // (calibrated) and 13.1% (paper) since the mesh keeps the CT's ring relief (12.4% and
-    // 13.9% before). The bound pins today's level; the calibrated light must keep beating the
-    // paper's Psi.
-    assert!(cal < 0.12, "calibrated {cal}");
+    // Measured with the default fusion (average, squared weights): 10.8% (calibrated) and
+    // 13.2% (paper); 12.4% and 13.9% before the mesh kept the CT's ring relief and the weights
+    // were squared. At this size (24 frames of 160x160) the bound pins today's level; issue 6's
+    // 10% is asserted on the demo-size phantom below. The calibrated light must keep beating
+    // the paper's Psi.
+    assert!(cal < 0.115, "calibrated {cal}");
     assert!(cal < pap, "{cal} vs {pap}");
+}
+
+/// Issue 6's aim on the demo-size phantom (80 frames of 320x320, what `bronchosim demo`
+/// builds): the default model's texture within 10% relative RMS of the true albedo.
+#[test]
+fn demo_phantom_albedo_is_within_ten_percent() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    phantom(dir, 80, "320x320");
+    ok(&run(&["build", "case", "--out", "model", "--quiet"], dir));
+    let model = bronchosim::model::Model::load(&dir.join("model")).unwrap();
+    let e = albedo_error(&model, &model.texture, &dir.join("case/truth")).unwrap();
+    println!(
+        "demo-size phantom: fused albedo vs truth {:.2}% over {} pixels",
+        100.0 * e.relative_rms,
+        e.pixels
+    );
+    // Measured 9.87% (release and test builds alike).
+    assert!(e.pixels > 700_000, "{} pixels compared", e.pixels);
+    assert!(e.relative_rms < 0.10, "{}", e.relative_rms);
 }
