@@ -3,6 +3,7 @@
 //! next to the paper's method and the two baselines on the same pixels.
 
 use bronchosim::workflow::albedo_truth::albedo_error;
+use std::path::Path;
 
 #[path = "common/cli.rs"]
 mod cli;
@@ -136,39 +137,20 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
     assert!(dir.join("model/albedo_paper.png").is_file());
 
     // Issue 8 on the phantom: the light model recovers the per-frame auto-gains (relative to
-    // frame 0) within 2% and the spot cone cos(theta)^k (truth/gains.json) within 5% RMS over
-    // the field of view the fit saw.
+    // the reference frame) within 2% and the spot cone cos(theta)^k (truth/gains.json) within
+    // 5% RMS over the field of view the fit saw.
     let read = |p: &str| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(dir.join(p)).unwrap()).unwrap()
     };
     let shading = read("model/shading.json");
     let truth = read("case/truth/gains.json");
     let cal = &shading["calibrated"];
-    let gains = cli::matrix(&cal["gains"]);
-    let tg: Vec<f64> = truth["frames"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|f| f["gain"].as_f64().unwrap())
-        .collect();
-    assert_eq!(gains.len(), tg.len());
-    // Relative to the model's reference frame (its gain is 1 by definition).
-    let r = cal["reference_frame"].as_u64().unwrap() as usize;
-    assert!((gains[r] - 1.0).abs() < 1e-12);
-    let gain_err: Vec<f64> = gains
-        .iter()
-        .zip(&tg)
-        .map(|(g, t)| g / (t / tg[r]) - 1.0)
-        .collect();
-    let worst_gain = gain_err.iter().fold(0.0f64, |m, e| m.max(e.abs()));
-    let rms_gain = (gain_err.iter().map(|e| e * e).sum::<f64>() / gain_err.len() as f64).sqrt();
-    // The same with the one free global scale fitted (geometric mean of fitted / true = 1)
-    // instead of taken from frame 0 alone.
-    let log_err: Vec<f64> = gains.iter().zip(&tg).map(|(g, t)| (g / t).ln()).collect();
-    let mean_log = log_err.iter().sum::<f64>() / log_err.len() as f64;
-    let scale_err: Vec<f64> = log_err.iter().map(|l| (l - mean_log).exp() - 1.0).collect();
-    let worst_scaled = scale_err.iter().fold(0.0f64, |m, e| m.max(e.abs()));
-    let rms_scaled = (scale_err.iter().map(|e| e * e).sum::<f64>() / scale_err.len() as f64).sqrt();
+    let GainErrors {
+        worst: worst_gain,
+        rms: rms_gain,
+        worst_scaled,
+        rms_scaled,
+    } = gain_errors(dir);
     let k = truth["cone_exponent"].as_f64().unwrap();
     let coeffs = cli::matrix(&cal["s"]);
     let edge = cal["cos_theta_edge"].as_f64().unwrap();
@@ -196,15 +178,15 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
     );
     assert!(cone_rms < 0.05, "cone RMS {cone_rms}");
     // Issue 8 aims at 2% per gain; measured here (24 frames, reference = the middle frame):
-    // worst 9.8%, RMS 4.1%; with the global scale fitted worst 7.5%, RMS 3.5%. Under the
-    // uniform-albedo fit each frame's gain absorbs the mean albedo of the mucosa it sees
-    // (vessels, pale patches); one correction against the fused texture
-    // (workflow::gain_refine) halves the frame-to-frame part, but the first and last frames,
-    // which share little surface with the others, stay uncertain. The bounds pin today's
-    // level so a regression shows.
-    assert!(rms_gain < 0.055, "gain RMS error {rms_gain}");
+    // worst 7.4%, RMS 3.1%; with the global scale fitted worst 7.6%, RMS 3.1% (before the Huber
+    // loss and the second correction: 9.8% / 4.1% and 7.5% / 3.5%). Under the uniform-albedo
+    // fit each frame's gain absorbs the mean albedo of the mucosa it sees (vessels, pale
+    // patches); the corrections against the fused texture (workflow::gain_refine) remove the
+    // frame-to-frame part, not the albedo's slow variation that neighbouring frames share. The
+    // bounds pin today's level so a regression shows.
+    assert!(rms_gain < 0.04, "gain RMS error {rms_gain}");
     assert!(
-        rms_scaled < 0.045,
+        rms_scaled < 0.04,
         "gain RMS error, global scale fitted: {rms_scaled}"
     );
 
@@ -276,8 +258,57 @@ fn fused_albedo_matches_the_phantom_truth() {
     assert!(cal < pap, "{cal} vs {pap}");
 }
 
-/// Issue 6's aim on the demo-size phantom (80 frames of 320x320, what `bronchosim demo`
-/// builds): the default model's texture within 10% relative RMS of the true albedo.
+/// Errors of the calibrated light's gains against the phantom's true auto-gains.
+struct GainErrors {
+    /// Largest |fitted / true - 1| relative to the model's reference frame.
+    worst: f64,
+    /// RMS of the same.
+    rms: f64,
+    /// Largest error with the one free global scale fitted (geometric mean of fitted / true =
+    /// 1) instead of taken from the reference frame alone.
+    worst_scaled: f64,
+    /// RMS of the same.
+    rms_scaled: f64,
+}
+
+/// [`GainErrors`] of the model in `dir/model` built from the phantom case `dir/case`.
+fn gain_errors(dir: &Path) -> GainErrors {
+    let read = |p: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(p)).unwrap()).unwrap()
+    };
+    let cal = read("model/shading.json")["calibrated"].clone();
+    let gains = cli::matrix(&cal["gains"]);
+    let tg: Vec<f64> = read("case/truth/gains.json")["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["gain"].as_f64().unwrap())
+        .collect();
+    assert_eq!(gains.len(), tg.len());
+    // Relative to the model's reference frame (its gain is 1 by definition).
+    let r = cal["reference_frame"].as_u64().unwrap() as usize;
+    assert!((gains[r] - 1.0).abs() < 1e-12);
+    let worst = |e: &[f64]| e.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+    let rms = |e: &[f64]| (e.iter().map(|e| e * e).sum::<f64>() / e.len() as f64).sqrt();
+    let rel: Vec<f64> = gains
+        .iter()
+        .zip(&tg)
+        .map(|(g, t)| g / (t / tg[r]) - 1.0)
+        .collect();
+    let log_err: Vec<f64> = gains.iter().zip(&tg).map(|(g, t)| (g / t).ln()).collect();
+    let mean_log = log_err.iter().sum::<f64>() / log_err.len() as f64;
+    let scaled: Vec<f64> = log_err.iter().map(|l| (l - mean_log).exp() - 1.0).collect();
+    GainErrors {
+        worst: worst(&rel),
+        rms: rms(&rel),
+        worst_scaled: worst(&scaled),
+        rms_scaled: rms(&scaled),
+    }
+}
+
+/// Issues 6 and 8 on the demo-size phantom (80 frames of 320x320, what `bronchosim demo`
+/// builds): the default model's texture within 10% relative RMS of the true albedo, and the
+/// per-frame gains against the true auto-gains.
 #[test]
 fn demo_phantom_albedo_is_within_ten_percent() {
     let tmp = tempfile::tempdir().unwrap();
@@ -291,7 +322,24 @@ fn demo_phantom_albedo_is_within_ten_percent() {
         100.0 * e.relative_rms,
         e.pixels
     );
-    // Measured 9.87% (release and test builds alike).
+    // Measured 9.75% (release and test builds alike).
     assert!(e.pixels > 700_000, "{} pixels compared", e.pixels);
     assert!(e.relative_rms < 0.10, "{}", e.relative_rms);
+    // Issue 8 aims at 2%; measured worst 4.6%, RMS 2.3% relative to the reference (the middle
+    // frame), 5.2% / 2.3% with the global scale fitted. The bounds pin today's level.
+    let g = gain_errors(dir);
+    println!(
+        "demo-size phantom: gains worst {:.2}%, RMS {:.2}% relative to the reference; {:.2}% / \
+         {:.2}% scale-free",
+        100.0 * g.worst,
+        100.0 * g.rms,
+        100.0 * g.worst_scaled,
+        100.0 * g.rms_scaled
+    );
+    assert!(
+        g.worst < 0.06 && g.rms < 0.03,
+        "{:.4} {:.4}",
+        g.worst,
+        g.rms
+    );
 }
