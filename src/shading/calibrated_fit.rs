@@ -50,7 +50,11 @@ pub struct CalibratedOptions {
     pub lm_polish: bool,
     /// Most LM iterations. Default 60.
     pub max_lm_iterations: usize,
-    /// Robust loss on the relative residuals. Default Tukey(4.685).
+    /// Robust loss on the relative residuals. Default Huber(1.345). Not Tukey: Tukey rejects
+    /// the vessels a near view resolves but keeps a far view's pixels that average them, so
+    /// the light comes out brighter near than far and the gains drift with distance. Measured
+    /// on the 80-frame demo phantom (build with two gain corrections): gains worst 8.2% ->
+    /// 4.6%, RMS 3.2% -> 2.3% relative to the reference; truth views +0.08 dB.
     pub robust: Robust,
     /// Most IRLS re-weightings (stops earlier once no parameter moves by 1e-4 of itself). Default 8.
     pub max_irls_iterations: usize,
@@ -74,7 +78,7 @@ impl Default for CalibratedOptions {
             tolerance: 1e-10,
             lm_polish: true,
             max_lm_iterations: 60,
-            robust: Robust::Tukey(4.685),
+            robust: Robust::Huber(1.345),
             max_irls_iterations: 8,
             relative_floor: 0.01,
             positivity_grid: 65,

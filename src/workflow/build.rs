@@ -22,7 +22,7 @@ use crate::shading::calibrated_predict::cos_theta_of;
 use crate::shading::calibrated_samples::{
     density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples,
 };
-use crate::shading::fit::{fit_psi, FitOptions, Robust};
+use crate::shading::fit::{fit_psi, FitOptions};
 use crate::shading::psi::PsiModel;
 use crate::shading::samples::{extract_samples, SampleOptions, SampleSet};
 use crate::shading::weights::{density_weights, WeightOptions};
@@ -121,15 +121,7 @@ impl Default for BuildOptions {
             // No inter-reflection term a_f by default: measured on the phantom (24 and 80
             // frames) it gained 0.5 dB on the truth views but lost 0.3 dB / gained 0.15 dB on
             // held-out frames, and it trades with s(theta) (cone error 1.7% -> 6.6% RMS).
-            // Huber, not Tukey: Tukey rejects the vessels a near view resolves but keeps a far
-            // view's pixels that average them, so the fitted light comes out brighter near
-            // than far and the gains drift with distance. Measured on the 80-frame demo
-            // (with 2 gain corrections): gains worst 8.2% -> 4.6%, RMS 3.2% -> 2.3% relative to
-            // the reference; truth views +0.08 dB, albedo error 9.87% -> 9.75%.
-            calibrated: CalibratedOptions {
-                robust: Robust::Huber(1.345),
-                ..CalibratedOptions::default()
-            },
+            calibrated: CalibratedOptions::default(),
             calibrated_reference: None,
             pool: PoolOptions::default(),
             max_pooled_samples: 4_000_000,
