@@ -150,6 +150,11 @@ struct GainsFile<'a> {
     frames: Vec<FrameGain>,
 }
 
+/// The mucosa albedo of the phantom case made with master seed `seed` (`truth.json` "seed").
+pub fn phantom_albedo(seed: u64) -> MucosaAlbedo {
+    MucosaAlbedo::new(seed.wrapping_mul(17).wrapping_add(5))
+}
+
 /// Write the phantom case to `out` (a new folder); see the module docs.
 pub fn write_phantom_case(out: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     if opts.frames == 0 || opts.width < 8 || opts.height < 8 {
@@ -242,7 +247,7 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     // Frames.
     let t = Instant::now();
     let scene = Scene::new(&mesh)?;
-    let albedo = MucosaAlbedo::new(seed.wrapping_mul(17).wrapping_add(5));
+    let albedo = phantom_albedo(seed);
     let camera = phantom_camera(opts.width, opts.height);
     let rays = SubpixelRays::new(&camera, opts.supersample);
     let frames_dir = dir.join("frames");

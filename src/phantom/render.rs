@@ -17,10 +17,10 @@ use crate::io::frames::Frame;
 use crate::math::Affine;
 use crate::raycast::{cast_frame_with, RayTable, Scene};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The light and reflectance model (unit-gain radiance). Angles in degrees.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct LightModel {
     /// Angle off the optical axis where the spot cone falls to half power (degrees).
     pub cone_half_angle_deg: f64,

@@ -13,4 +13,5 @@ pub mod progress;
 pub mod render;
 pub mod report;
 pub mod segment;
+pub mod shading_truth;
 pub mod truth_eval;
