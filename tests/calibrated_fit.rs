@@ -256,3 +256,57 @@ fn calibrated_predicts_held_out_frames_better_than_nearest_psi() {
     assert!(cal > pap + 1.0, "calibrated {cal} vs Psi {pap}");
     assert!(cal_u > pap_u, "calibrated {cal_u} vs Psi {pap_u}");
 }
+
+#[test]
+fn interreflection_term_keeps_far_light_out_of_the_gains() {
+    // Light scattered inside the tube, in proportion to the frame's mean direct light (the
+    // phantom's form, here 12% of it): it does not fall off as 1/z^2, so a light without the
+    // term sees far surfaces too bright and each gain absorbs its frame's share of them.
+    let views = sequence(FRAMES, 11);
+    let opts = RenderOptions {
+        slow_albedo: 0.0,
+        interreflection: 0.12,
+        ..Default::default()
+    };
+    let frames: Vec<Frame> = views
+        .iter()
+        .enumerate()
+        .map(|(f, v)| render(v, &opts, 1000 + f as u64))
+        .collect();
+    let all: Vec<&Frame> = frames.iter().collect();
+    let vs: Vec<&View> = views.iter().collect();
+    let (s, w) = pooled(&all);
+    let with = fit_calibrated(
+        &s,
+        &w,
+        &CalibratedOptions {
+            interreflection: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let without = fit_calibrated(&s, &w, &CalibratedOptions::default()).unwrap();
+    let (ge_with, ge_without) = (
+        gain_error(&with.model, &vs),
+        gain_error(&without.model, &vs),
+    );
+    let (pe_with, pe_without) = (profile_error(&with.model), profile_error(&without.model));
+    println!(
+        "inter-reflection 12%: max gain error {:.2}% with the term, {:.2}% without; s RMS error \
+         {:.2}% / {:.2}%",
+        100.0 * ge_with,
+        100.0 * ge_without,
+        100.0 * pe_with,
+        100.0 * pe_without
+    );
+    assert!(ge_with < 0.02, "with the term: max gain error {ge_with}");
+    assert!(pe_with < 0.05, "with the term: profile RMS error {pe_with}");
+    assert!(ge_with < 0.5 * ge_without, "{ge_with} vs {ge_without}");
+    // The fitted term is light added to every frame, scaled with the frame's gain.
+    let amb = with
+        .model
+        .ambient
+        .as_ref()
+        .expect("the term is stored per frame");
+    assert!(amb.iter().all(|a| a.iter().all(|&v| v > 0.0)));
+}

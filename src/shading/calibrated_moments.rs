@@ -13,6 +13,7 @@
 
 use super::calibrated::basis_into;
 use super::calibrated_samples::PooledSamples;
+use super::frame_shading::LUMA;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
@@ -27,6 +28,9 @@ pub(crate) struct Layout {
     pub frames: usize,
     /// Whether the ambient term a_fc is a parameter.
     pub ambient: bool,
+    /// Whether the inter-reflection term `g_f kappa_c M_f` is in the model (kappa_c: 3
+    /// parameters; M_f: the frame's mean direct luminance at unit gain, from its moments' q).
+    pub interreflection: bool,
 }
 
 impl Layout {
@@ -50,9 +54,13 @@ impl Layout {
     pub fn a_off(&self) -> usize {
         self.g_off() + self.frames
     }
+    /// Offset of kappa (3 values, one per channel).
+    pub fn k_off(&self) -> usize {
+        self.a_off() + if self.ambient { 3 * self.frames } else { 0 }
+    }
     /// Length of the parameter vector.
     pub fn len(&self) -> usize {
-        self.a_off() + if self.ambient { 3 * self.frames } else { 0 }
+        self.k_off() + if self.interreflection { 3 } else { 0 }
     }
 }
 
@@ -63,6 +71,9 @@ pub(crate) struct FrameMoments {
     pub g: Vec<DMatrix<f64>>,
     pub h: [DVector<f64>; 3],
     pub s: [f64; 3],
+    /// Mean over the frame's surface pixels of `B(gamma) B(t)^T / z^2` (nr x ns), when the
+    /// inter-reflection term is fitted.
+    pub q: Option<DMatrix<f64>>,
 }
 
 impl FrameMoments {
@@ -180,13 +191,47 @@ pub(crate) fn accumulate(
                 g,
                 h: h.map(DVector::from_vec),
                 s,
+                q: None,
             }
         })
         .collect()
 }
 
-/// The coefficient vector `y_fc = (g_f vec(rho_c s^T), a_fc)` from the parameters.
-pub(crate) fn y_of(lay: &Layout, p: &[f64], f: usize, c: usize) -> DVector<f64> {
+/// The full s coefficients (s_0 = 1).
+fn s_full(lay: &Layout, p: &[f64]) -> Vec<f64> {
+    let mut e = vec![1.0];
+    e.extend_from_slice(&p[lay.e_off()..lay.e_off() + lay.ns - 1]);
+    e
+}
+
+/// `M_f = sum_c LUMA_c rho_c^T q s`: the frame's mean direct luminance at unit gain.
+pub(crate) fn mean_direct(lay: &Layout, p: &[f64], q: &DMatrix<f64>) -> f64 {
+    let e = DVector::from_vec(s_full(lay, p));
+    let qe = q * e;
+    (0..3)
+        .map(|c| {
+            let rho = DVector::from_column_slice(&p[lay.c_off(c)..lay.c_off(c) + lay.nr]);
+            LUMA[c] * rho.dot(&qe)
+        })
+        .sum()
+}
+
+/// The additive light of frame f, channel c: `a_fc` and/or `g_f kappa_c M_f`.
+pub(crate) fn ambient_of(lay: &Layout, p: &[f64], fm: &FrameMoments, f: usize, c: usize) -> f64 {
+    let mut a = 0.0;
+    if lay.ambient {
+        a += p[lay.a_off() + 3 * f + c];
+    }
+    if lay.interreflection {
+        if let Some(q) = &fm.q {
+            a += p[lay.g_off() + f] * p[lay.k_off() + c] * mean_direct(lay, p, q);
+        }
+    }
+    a
+}
+
+/// The coefficient vector `y_fc = (g_f vec(rho_c s^T), ambient_fc)` from the parameters.
+pub(crate) fn y_of(lay: &Layout, p: &[f64], fm: &FrameMoments, f: usize, c: usize) -> DVector<f64> {
     let d = lay.d();
     let mut y = DVector::zeros(d + 1);
     let gf = p[lay.g_off() + f];
@@ -197,9 +242,7 @@ pub(crate) fn y_of(lay: &Layout, p: &[f64], f: usize, c: usize) -> DVector<f64> 
             y[j * lay.ns + k] = gf * rho[j] * e;
         }
     }
-    if lay.ambient {
-        y[d] = p[lay.a_off() + 3 * f + c];
-    }
+    y[d] = ambient_of(lay, p, fm, f, c);
     y
 }
 
@@ -208,7 +251,7 @@ pub(crate) fn cost(lay: &Layout, m: &[FrameMoments], p: &[f64]) -> f64 {
     let mut total = 0.0;
     for (f, fm) in m.iter().enumerate() {
         for c in 0..3 {
-            let y = y_of(lay, p, f, c);
+            let y = y_of(lay, p, fm, f, c);
             let gy = fm.g(c) * &y;
             total += y.dot(&gy) - 2.0 * fm.h[c].dot(&y) + fm.s[c];
         }
@@ -231,17 +274,29 @@ pub(crate) fn normal_equations(
     for (f, fm) in m.iter().enumerate() {
         let gf = p[lay.g_off() + f];
         for c in 0..3 {
-            let y = y_of(lay, p, f, c);
+            let y = y_of(lay, p, fm, f, c);
             let gm = fm.g(c);
             let gy = gm * &y;
             total += y.dot(&gy) - 2.0 * fm.h[c].dot(&y) + fm.s[c];
             let r = gy - &fm.h[c];
-            // Local Jacobian dy/dparams: rho_c, s_1.., g_f, a_fc.
-            let mut idx: Vec<usize> = (0..lay.nr).map(|j| lay.c_off(c) + j).collect();
+            // Local Jacobian dy/dparams: rho (channel c, or all channels with the
+            // inter-reflection term, whose M_f depends on every channel), s_1.., g_f, a_fc, kappa_c.
+            let ir = lay.interreflection && fm.q.is_some();
+            let rho_channels: Vec<usize> = if ir { vec![0, 1, 2] } else { vec![c] };
+            let mut idx: Vec<usize> = rho_channels
+                .iter()
+                .flat_map(|&cc| (0..lay.nr).map(move |j| lay.c_off(cc) + j))
+                .collect();
+            let rn = idx.len();
+            let own = if ir { c * lay.nr } else { 0 };
             idx.extend((1..lay.ns).map(|k| lay.e_off() + k - 1));
+            let g_col = idx.len();
             idx.push(lay.g_off() + f);
             if lay.ambient {
                 idx.push(lay.a_off() + 3 * f + c);
+            }
+            if ir {
+                idx.push(lay.k_off() + c);
             }
             let mut jac = DMatrix::zeros(d + 1, idx.len());
             let rho = &p[lay.c_off(c)..lay.c_off(c) + lay.nr];
@@ -249,15 +304,39 @@ pub(crate) fn normal_equations(
                 for k in 0..lay.ns {
                     let e = if k == 0 { 1.0 } else { p[lay.e_off() + k - 1] };
                     let row = j * lay.ns + k;
-                    jac[(row, j)] = gf * e;
+                    jac[(row, own + j)] = gf * e;
                     if k > 0 {
-                        jac[(row, lay.nr + k - 1)] = gf * rho[j];
+                        jac[(row, rn + k - 1)] = gf * rho[j];
                     }
-                    jac[(row, lay.nr + lay.ns - 1)] = rho[j] * e;
+                    jac[(row, g_col)] = rho[j] * e;
                 }
             }
             if lay.ambient {
-                jac[(d, lay.nr + lay.ns)] = 1.0;
+                jac[(d, g_col + 1)] = 1.0;
+            }
+            if ir {
+                let q = fm.q.as_ref().expect("checked");
+                let kappa = p[lay.k_off() + c];
+                let e = DVector::from_vec(s_full(lay, p));
+                let qe = q * &e;
+                let mf = mean_direct(lay, p, q);
+                for cc in 0..3 {
+                    for j in 0..lay.nr {
+                        jac[(d, cc * lay.nr + j)] = gf * kappa * LUMA[cc] * qe[j];
+                    }
+                }
+                for k in 1..lay.ns {
+                    let mut v = 0.0;
+                    for cc in 0..3 {
+                        let rc = &p[lay.c_off(cc)..lay.c_off(cc) + lay.nr];
+                        for j in 0..lay.nr {
+                            v += LUMA[cc] * rc[j] * q[(j, k)];
+                        }
+                    }
+                    jac[(d, rn + k - 1)] = gf * kappa * v;
+                }
+                jac[(d, g_col)] = kappa * mf;
+                jac[(d, idx.len() - 1)] = gf * mf;
             }
             let gj = gm * &jac;
             let hl = jac.transpose() * gj;
@@ -271,4 +350,29 @@ pub(crate) fn normal_equations(
         }
     }
     (hm, grad, total.max(0.0))
+}
+
+/// Per frame, the mean over its surface geometry samples of `B(gamma) B(t)^T / z^2` (nr x ns).
+pub(crate) fn q_of(samples: &PooledSamples, cos_edge: f64, lay: &Layout) -> Vec<DMatrix<f64>> {
+    let span = (1.0 - cos_edge).max(1e-12);
+    (0..samples.frames())
+        .into_par_iter()
+        .map(|f| {
+            let mut q = DMatrix::zeros(lay.nr, lay.ns);
+            let (mut bg, mut bt) = (vec![0.0; lay.nr], vec![0.0; lay.ns]);
+            let geo = samples.geometry_of(f);
+            for g in geo {
+                let t = ((1.0 - f64::from(g[1])) / span).clamp(0.0, 1.0);
+                basis_into(f64::from(g[0]).clamp(0.0, 1.0), &mut bg);
+                basis_into(t, &mut bt);
+                let inv = 1.0 / f64::from(g[2]).powi(2);
+                for j in 0..lay.nr {
+                    for k in 0..lay.ns {
+                        q[(j, k)] += bg[j] * bt[k] * inv;
+                    }
+                }
+            }
+            q / geo.len().max(1) as f64
+        })
+        .collect()
 }

@@ -141,6 +141,9 @@ pub struct RenderOptions {
     pub ambient: f64,
     /// Relative amplitude of the albedo's slow variation along and around the airway.
     pub slow_albedo: f64,
+    /// Inter-reflection in proportion to the frame's light: this fraction of the frame's mean
+    /// direct luminance, times albedo / 0.3, added to every surface pixel (the phantom's form).
+    pub interreflection: f64,
 }
 
 impl Default for RenderOptions {
@@ -151,6 +154,7 @@ impl Default for RenderOptions {
             power: 90.0,
             ambient: 0.0,
             slow_albedo: 0.08,
+            interreflection: 0.0,
         }
     }
 }
@@ -198,6 +202,8 @@ pub fn render(view: &View, opts: &RenderOptions, seed: u64) -> Frame {
     let n_around = (2.0 * PI * A0 / TEXEL_MM).round();
     let mut rng = Rng::new(seed);
     let amb_irr = opts.ambient * opts.power / 100.0;
+    let mut radiance = vec![[0.0f64; 3]; n];
+    let mut albedo_at = vec![[0.0f64; 3]; n];
     for py in 0..size {
         for px in 0..size {
             let i = py * size + px;
@@ -216,6 +222,7 @@ pub fn render(view: &View, opts: &RenderOptions, seed: u64) -> Frame {
                 let g = d[0] * grad[0] + d[1] * grad[1] + d[2] * grad[2];
                 let phi = (p[1] / B0).atan2(p[0] / A0);
                 let alb = albedo(p[2], phi, opts.slow_albedo);
+                albedo_at[i] = alb;
                 fr.gamma[i] = g as f32;
                 fr.z[i] = t as f32;
                 let ti = (p[2] / TEXEL_MM).floor() as u32;
@@ -233,13 +240,20 @@ pub fn render(view: &View, opts: &RenderOptions, seed: u64) -> Frame {
                     }
                 }
             }
-            for k in 0..3 {
-                let v = view.gain * rad[k];
-                let sigma = (0.0004 * v + 0.002f64.powi(2)).sqrt();
-                let noisy = (v + sigma * rng.normal()).clamp(0.0, 1.0);
-                let code = (srgb_encode(noisy) * 255.0).round() / 255.0;
-                fr.rgb[3 * i + k] = srgb_decode(code) as f32;
-            }
+            radiance[i] = rad;
+        }
+    }
+    let lum = |c: &[f64; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+    let hits = fr.z.iter().filter(|&&z| z > 0.0).count().max(1);
+    let mean_direct = radiance.iter().map(lum).sum::<f64>() / hits as f64;
+    for i in 0..n {
+        for k in 0..3 {
+            let inter = opts.interreflection * mean_direct * albedo_at[i][k] / 0.3;
+            let v = view.gain * (radiance[i][k] + inter);
+            let sigma = (0.0004 * v + 0.002f64.powi(2)).sqrt();
+            let noisy = (v + sigma * rng.normal()).clamp(0.0, 1.0);
+            let code = (srgb_encode(noisy) * 255.0).round() / 255.0;
+            fr.rgb[3 * i + k] = srgb_decode(code) as f32;
         }
     }
     fr
