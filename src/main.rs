@@ -110,11 +110,10 @@ enum Command {
         /// phantom it did not clearly help, see BENCHMARKS.md).
         #[arg(long)]
         ambient: bool,
-        /// Fit the calibrated light's inter-reflection term: kappa times the frame's mean direct
-        /// light, 3 parameters for the whole video (off by default: on the phantom it improves
-        /// the gains and new views but bends the light's angular profile, see BENCHMARKS.md).
+        /// Leave out the calibrated light's inter-reflection term (kappa times the frame's mean
+        /// observed light, 3 parameters for the whole video; on by default, see BENCHMARKS.md).
         #[arg(long)]
-        interreflection: bool,
+        no_interreflection: bool,
         /// Hold out every N-th frame to cross-validate both shading models (0: skip).
         #[arg(long, default_value_t = 5)]
         cross_validate_every: usize,
@@ -311,7 +310,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             shading,
             cross_validate_every,
             ambient,
-            interreflection,
+            no_interreflection,
             truth,
             force,
         } => {
@@ -331,7 +330,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             opts.atlas.texel_mm = texel_mm;
             opts.segment.mesh.decimate.target_edge_mm = edge_mm;
             opts.calibrated.ambient = ambient;
-            opts.calibrated.interreflection = interreflection;
+            opts.calibrated.interreflection = !no_interreflection;
             opts.fusion.method = match fusion.as_str() {
                 "max" => bronchosim::texture::fusion::FusionMethod::MaxWeightSmoothed {
                     sigma_texels: 2.0,

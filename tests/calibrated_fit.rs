@@ -261,7 +261,8 @@ fn calibrated_predicts_held_out_frames_better_than_nearest_psi() {
 fn interreflection_term_keeps_far_light_out_of_the_gains() {
     // Light scattered inside the tube, in proportion to the frame's mean direct light (the
     // phantom's form, here 12% of it): it does not fall off as 1/z^2, so a light without the
-    // term sees far surfaces too bright and each gain absorbs its frame's share of them.
+    // term sees far surfaces too bright and each gain absorbs its frame's share of them. The
+    // fit models it as kappa times the frame's mean observed luminance.
     let views = sequence(FRAMES, 11);
     let opts = RenderOptions {
         slow_albedo: 0.0,
@@ -276,16 +277,16 @@ fn interreflection_term_keeps_far_light_out_of_the_gains() {
     let all: Vec<&Frame> = frames.iter().collect();
     let vs: Vec<&View> = views.iter().collect();
     let (s, w) = pooled(&all);
-    let with = fit_calibrated(
+    let with = fit_calibrated(&s, &w, &CalibratedOptions::default()).unwrap();
+    let without = fit_calibrated(
         &s,
         &w,
         &CalibratedOptions {
-            interreflection: true,
+            interreflection: false,
             ..Default::default()
         },
     )
     .unwrap();
-    let without = fit_calibrated(&s, &w, &CalibratedOptions::default()).unwrap();
     let (ge_with, ge_without) = (
         gain_error(&with.model, &vs),
         gain_error(&without.model, &vs),

@@ -177,10 +177,17 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
         100.0 * cone_rms,
         theta_edge.to_degrees()
     );
-    assert!(cone_rms < 0.05, "cone RMS {cone_rms}");
+    // Issue 8 aims at 5%. Measured 5.87% with the inter-reflection term (the default), 2.18%
+    // without it; but without it this phantom's 2% was luck of its albedo: on the 80-frame
+    // demo phantom seeds 2 and 3 measure 10.4% and 11.3% without the term, 4.9% and 5.8%
+    // with it, and with a uniform albedo 4.8% without and 0.15% with (BENCHMARKS.md
+    // "Inter-reflection"). What bends the profile is the albedo's slow variation (chiefly the
+    // vessel density) that a single video's centre and edge pixels see differently.
+    assert!(cone_rms < 0.07, "cone RMS {cone_rms}");
     // Issue 8 aims at 2% per gain; measured here (24 frames, reference = the middle frame):
-    // worst 7.4%, RMS 3.1%; with the global scale fitted worst 7.6%, RMS 3.1% (before the Huber
-    // loss and the second correction: 9.8% / 4.1% and 7.5% / 3.5%). Under the uniform-albedo
+    // worst 7.5%, RMS 3.2%; with the global scale fitted worst 7.6%, RMS 3.2% (7.4% / 3.1%
+    // without the inter-reflection term; before the Huber loss and the second correction:
+    // 9.8% / 4.1% and 7.5% / 3.5%). Under the uniform-albedo
     // fit each frame's gain absorbs the mean albedo of the mucosa it sees (vessels, pale
     // patches); the corrections against the fused texture (workflow::gain_refine) remove the
     // frame-to-frame part, not the albedo's slow variation that neighbouring frames share. The
@@ -323,11 +330,13 @@ fn demo_phantom_albedo_is_within_ten_percent() {
         100.0 * e.relative_rms,
         e.pixels
     );
-    // Measured 9.75% (release and test builds alike).
+    // Measured 9.89% (9.75% without the inter-reflection term; release and test builds alike).
     assert!(e.pixels > 700_000, "{} pixels compared", e.pixels);
     assert!(e.relative_rms < 0.10, "{}", e.relative_rms);
-    // Issue 8 aims at 2%; measured worst 4.6%, RMS 2.3% relative to the reference (the middle
-    // frame), 5.2% / 2.3% with the global scale fitted. The bounds pin today's level.
+    // Issue 8 aims at 2%; measured worst 6.5% (frame 0, the top of the trachea that no other
+    // frame sees), RMS 2.14% relative to the reference (the middle frame), 5.9% / 2.0% with
+    // the global scale fitted; without the inter-reflection term 4.6% / 2.3%. The bounds pin
+    // today's level.
     let g = gain_errors(dir);
     println!(
         "demo-size phantom: gains worst {:.2}%, RMS {:.2}% relative to the reference; {:.2}% / \
@@ -338,7 +347,7 @@ fn demo_phantom_albedo_is_within_ten_percent() {
         100.0 * g.rms_scaled
     );
     assert!(
-        g.worst < 0.06 && g.rms < 0.03,
+        g.worst < 0.07 && g.rms < 0.025,
         "{:.4} {:.4}",
         g.worst,
         g.rms

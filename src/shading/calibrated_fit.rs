@@ -3,9 +3,7 @@
 //! Steps: (1) one pass over the samples builds per-frame moments (`calibrated_moments`);
 //! (2) alternate exact linear solves from s ≡ 1, g ≡ 1, a ≡ 0: rho per channel given s, g, a;
 //! s (with s = 1 on the axis eliminated) given rho, g, a; g_f and a_f per frame given rho, s
-//! (a 1x1 or 4x4 system each); kappa (the inter-reflection term `g_f kappa_c M_f`, 3 values;
-//! M_f depends on rho and s, so these steps are Gauss–Newton steps and the alternation
-//! iterates them); after each round the reference frame's gain is fixed to 1 by
+//! (a 1x1 or 4x4 system each); kappa (the inter-reflection term, 3 values) given the rest; after each round the reference frame's gain is fixed to 1 by
 //! moving the scale into rho; (3) a joint Levenberg–Marquardt polish over every parameter
 //! (dense Gauss–Newton matrix, a few hundred parameters); (4) robust IRLS: Tukey or Huber
 //! weights on each sample's relative residual, shared by the channels (vessels and
@@ -42,16 +40,15 @@ pub struct CalibratedOptions {
     pub s_degree: usize,
     /// Fit an inter-reflection term a_f per frame and channel. Default false.
     pub ambient: bool,
-    /// Fit inter-reflection as `a_fc = g_f kappa_c M_f`: light scattered inside the tube, in
-    /// proportion to the frame's mean direct light M_f (over every surface pixel of the
-    /// frame, from the fitted rho and s), with 3 parameters kappa_c for the whole video. With a
-    /// light at the lens the direct light falls as 1/z^2 but the scattered light does not, so
-    /// without this term far surfaces come out brighter than the model (+20% at 30 mm on the
-    /// demo phantom) and each gain absorbs its frame's share of far pixels. Default false:
-    /// measured on the 80-frame demo phantom it helps the gains (RMS 2.33% -> 2.01%, worst
-    /// 4.55% -> 5.43%), the truth views (31.07 -> 31.99 dB) and the held-out frames (33.02 ->
-    /// 33.27 dB) but bends the light's angular profile (cone error 1.6% -> 6.9% RMS, above
-    /// issue 8's 5%); on a synthetic tube with exact geometry it recovers both (tests).
+    /// Fit inter-reflection as `kappa_c L_f`: light scattered inside the tube, in proportion
+    /// to the light the frame's view holds, measured as its mean observed luminance L_f over
+    /// all surface pixels (auto-exposure included); 3 parameters kappa_c for the whole video.
+    /// With the light at the lens the direct light falls as 1/z^2 but the scattered light
+    /// does not, so without this term far surfaces come out brighter than the model and each
+    /// gain absorbs its frame's share of far pixels. Default true: on the demo phantom
+    /// (seeds 1-3) it raises the truth views by 0.9-2.1 dB and the held-out frames by
+    /// 0.2-0.4 dB; with a uniform albedo it recovers the cone profile to 0.15% RMS (4.8%
+    /// without). See BENCHMARKS.md "Inter-reflection".
     pub interreflection: bool,
     /// Frame whose gain is fixed to 1. Default 0.
     pub reference_frame: usize,
@@ -86,7 +83,7 @@ impl Default for CalibratedOptions {
             rho_degree: 3,
             s_degree: 3,
             ambient: false,
-            interreflection: false,
+            interreflection: true,
             reference_frame: 0,
             max_alternations: 40,
             tolerance: 1e-10,
@@ -160,7 +157,16 @@ pub fn fit_calibrated_with_albedo(
 
 fn check_inputs(samples: &PooledSamples, density: &[f32], opts: &CalibratedOptions) -> Result<()> {
     let f = samples.frames();
-    let need = 3 * (opts.rho_degree + 1) + opts.s_degree + f * if opts.ambient { 4 } else { 1 };
+    let need = 3 * (opts.rho_degree + 1)
+        + opts.s_degree
+        + f * if opts.ambient { 4 } else { 1 }
+        + if opts.interreflection { 3 } else { 0 };
+    if opts.interreflection && samples.frame_light.len() != f {
+        return Err(Error::Other(format!(
+            "calibrated fit: inter-reflection needs each frame's mean light ({} for {f} frames)",
+            samples.frame_light.len()
+        )));
+    }
     if samples.len() < need {
         return Err(Error::Other(format!(
             "calibrated fit: {} samples for {need} parameters",
@@ -233,16 +239,8 @@ fn fit_inner(
     let mut rep = CalibratedReport::default();
     let mut w = base.clone();
     let mut constrained = false;
-    let qs = lay
-        .interreflection
-        .then(|| super::calibrated_moments::q_of(samples, cos_edge, &lay));
     for round in 0..=opts.max_irls_iterations {
-        let mut m = accumulate(samples, &t, &w, albedo, &lay);
-        if let Some(qs) = &qs {
-            for (fm, q) in m.iter_mut().zip(qs) {
-                fm.q = Some(q.clone());
-            }
-        }
+        let m = accumulate(samples, &t, &w, albedo, &lay);
         let scale = rho_scale(&m);
         let prev = p.clone();
         if !constrained {
@@ -268,17 +266,16 @@ fn fit_inner(
             break;
         }
         rep.irls_iterations += 1;
-        w = robust_weights(samples, &t, &base, albedo, &lay, &p, qs.as_deref(), opts);
+        w = robust_weights(samples, &t, &base, albedo, &lay, &p, opts);
     }
-    let (rms, _) = residual_rms(samples, &t, &w, albedo, &lay, &p, qs.as_deref());
+    let (rms, _) = residual_rms(samples, &t, &w, albedo, &lay, &p);
     let wsum_base: f64 = base.iter().map(|&x| f64::from(x)).sum();
     let wsum: f64 = w.iter().map(|&x| f64::from(x)).sum();
     rep.downweighted = 1.0 - wsum / wsum_base.max(1e-300);
-    let amb = frame_ambient(&lay, &p, qs.as_deref());
     let model = model_of(
         &lay,
         &p,
-        &amb,
+        &samples.frame_light,
         cos_edge,
         opts.reference_frame,
         rms,
@@ -331,7 +328,7 @@ fn params_of(lay: &Layout, m: &CalibratedModel) -> Result<Vec<f64>> {
 fn model_of(
     lay: &Layout,
     p: &[f64],
-    amb: &[[f64; 3]],
+    frame_light: &[f64],
     cos_edge: f64,
     reference: usize,
     rms: [f64; 3],
@@ -345,7 +342,16 @@ fn model_of(
         cos_theta_edge: cos_edge,
         gains: p[lay.g_off()..lay.g_off() + lay.frames].to_vec(),
         reference_frame: reference,
-        ambient: (lay.ambient || lay.interreflection).then(|| amb.to_vec()),
+        ambient: (lay.ambient || lay.interreflection).then(|| {
+            (0..lay.frames)
+                .map(|f| {
+                    let light = frame_light.get(f).copied().unwrap_or(0.0);
+                    std::array::from_fn(|c| {
+                        super::calibrated_moments::ambient_of(lay, p, light, f, c)
+                    })
+                })
+                .collect()
+        }),
         rms_residual: rms,
         samples_used: n,
     }
@@ -602,7 +608,6 @@ fn lm_polish(
 
 /// The model's prediction per channel for sample i (albedo included when given).
 #[inline]
-#[allow(clippy::too_many_arguments)] // private hot-loop helper; a struct would only rename them
 fn predict(
     lay: &Layout,
     p: &[f64],
@@ -610,7 +615,6 @@ fn predict(
     samples: &PooledSamples,
     t: &[f32],
     albedo: Option<&[Vec<f32>; 3]>,
-    amb: &[[f64; 3]],
     i: usize,
 ) -> [f64; 3] {
     let f = samples.frame[i] as usize;
@@ -619,29 +623,10 @@ fn predict(
     let k = p[lay.g_off() + f] * bernstein_eval(s_coeffs, f64::from(t[i])) / (z * z);
     std::array::from_fn(|c| {
         let alb = albedo.map_or(1.0, |a| f64::from(a[c][i]));
-        k * alb * bernstein_eval(&p[lay.c_off(c)..lay.c_off(c) + lay.nr], gam) + amb[f][c]
+        let light = samples.frame_light.get(f).copied().unwrap_or(0.0);
+        let amb = super::calibrated_moments::ambient_of(lay, p, light, f, c);
+        k * alb * bernstein_eval(&p[lay.c_off(c)..lay.c_off(c) + lay.nr], gam) + amb
     })
-}
-
-/// Per frame, the additive light of each channel: a_fc and/or g_f kappa_c M_f.
-fn frame_ambient(lay: &Layout, p: &[f64], qs: Option<&[DMatrix<f64>]>) -> Vec<[f64; 3]> {
-    (0..lay.frames)
-        .map(|f| {
-            std::array::from_fn(|c| {
-                let mut a = if lay.ambient {
-                    p[lay.a_off() + 3 * f + c]
-                } else {
-                    0.0
-                };
-                if let (true, Some(qs)) = (lay.interreflection, qs) {
-                    a += p[lay.g_off() + f]
-                        * p[lay.k_off() + c]
-                        * super::calibrated_moments::mean_direct(lay, p, &qs[f]);
-                }
-                a
-            })
-        })
-        .collect()
 }
 
 fn s_coeffs(lay: &Layout, p: &[f64]) -> Vec<f64> {
@@ -652,7 +637,6 @@ fn s_coeffs(lay: &Layout, p: &[f64]) -> Vec<f64> {
 
 /// New weights: `base x robust(u / sigma)` with u the RMS over channels of the relative
 /// residual `(I - pred) / (|pred| + floor)` and sigma its robust scale.
-#[allow(clippy::too_many_arguments)] // the fit's state, passed as it is in fit_inner
 fn robust_weights(
     samples: &PooledSamples,
     t: &[f32],
@@ -660,11 +644,9 @@ fn robust_weights(
     albedo: Option<&[Vec<f32>; 3]>,
     lay: &Layout,
     p: &[f64],
-    qs: Option<&[DMatrix<f64>]>,
     opts: &CalibratedOptions,
 ) -> Vec<f32> {
     let sc = s_coeffs(lay, p);
-    let amb = frame_ambient(lay, p, qs);
     let u: Vec<f32> = (0..samples.len())
         .into_par_iter()
         .with_min_len(4096)
@@ -672,7 +654,7 @@ fn robust_weights(
             if base[i] == 0.0 {
                 return f32::NAN;
             }
-            let pr = predict(lay, p, &sc, samples, t, albedo, &amb, i);
+            let pr = predict(lay, p, &sc, samples, t, albedo, i);
             let ss: f64 = (0..3)
                 .map(|c| {
                     let e = (f64::from(samples.rgb[c][i]) - pr[c])
@@ -729,10 +711,8 @@ fn residual_rms(
     albedo: Option<&[Vec<f32>; 3]>,
     lay: &Layout,
     p: &[f64],
-    qs: Option<&[DMatrix<f64>]>,
 ) -> ([f64; 3], f64) {
     let sc = s_coeffs(lay, p);
-    let amb = frame_ambient(lay, p, qs);
     let (sums, ws) = (0..samples.len())
         .into_par_iter()
         .with_min_len(4096)
@@ -743,7 +723,7 @@ fn residual_rms(
                 if wi == 0.0 {
                     return (acc, ws);
                 }
-                let pr = predict(lay, p, &sc, samples, t, albedo, &amb, i);
+                let pr = predict(lay, p, &sc, samples, t, albedo, i);
                 for c in 0..3 {
                     let e = f64::from(samples.rgb[c][i]) - pr[c];
                     acc[c] += wi * e * e;

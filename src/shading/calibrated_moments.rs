@@ -13,7 +13,6 @@
 
 use super::calibrated::basis_into;
 use super::calibrated_samples::PooledSamples;
-use super::frame_shading::LUMA;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
@@ -28,8 +27,8 @@ pub(crate) struct Layout {
     pub frames: usize,
     /// Whether the ambient term a_fc is a parameter.
     pub ambient: bool,
-    /// Whether the inter-reflection term `g_f kappa_c M_f` is in the model (kappa_c: 3
-    /// parameters; M_f: the frame's mean direct luminance at unit gain, from its moments' q).
+    /// Whether the inter-reflection term `kappa_c L_f` is in the model (kappa_c: 3
+    /// parameters; L_f: the frame's mean observed luminance, [`FrameMoments::light`]).
     pub interreflection: bool,
 }
 
@@ -71,9 +70,8 @@ pub(crate) struct FrameMoments {
     pub g: Vec<DMatrix<f64>>,
     pub h: [DVector<f64>; 3],
     pub s: [f64; 3],
-    /// Mean over the frame's surface pixels of `B(gamma) B(t)^T / z^2` (nr x ns), when the
-    /// inter-reflection term is fitted.
-    pub q: Option<DMatrix<f64>>,
+    /// The frame's mean observed luminance over its surface pixels (0 when not pooled).
+    pub light: f64,
 }
 
 impl FrameMoments {
@@ -191,47 +189,27 @@ pub(crate) fn accumulate(
                 g,
                 h: h.map(DVector::from_vec),
                 s,
-                q: None,
+                light: samples.frame_light.get(f).copied().unwrap_or(0.0),
             }
         })
         .collect()
 }
 
-/// The full s coefficients (s_0 = 1).
-fn s_full(lay: &Layout, p: &[f64]) -> Vec<f64> {
-    let mut e = vec![1.0];
-    e.extend_from_slice(&p[lay.e_off()..lay.e_off() + lay.ns - 1]);
-    e
-}
-
-/// `M_f = sum_c LUMA_c rho_c^T q s`: the frame's mean direct luminance at unit gain.
-pub(crate) fn mean_direct(lay: &Layout, p: &[f64], q: &DMatrix<f64>) -> f64 {
-    let e = DVector::from_vec(s_full(lay, p));
-    let qe = q * e;
-    (0..3)
-        .map(|c| {
-            let rho = DVector::from_column_slice(&p[lay.c_off(c)..lay.c_off(c) + lay.nr]);
-            LUMA[c] * rho.dot(&qe)
-        })
-        .sum()
-}
-
-/// The additive light of frame f, channel c: `a_fc` and/or `g_f kappa_c M_f`.
-pub(crate) fn ambient_of(lay: &Layout, p: &[f64], fm: &FrameMoments, f: usize, c: usize) -> f64 {
+/// The light of frame f, channel c that does not depend on the surface's orientation or
+/// distance: `a_fc` and/or `kappa_c L_f` (`light` = L_f).
+pub(crate) fn ambient_of(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize) -> f64 {
     let mut a = 0.0;
     if lay.ambient {
         a += p[lay.a_off() + 3 * f + c];
     }
     if lay.interreflection {
-        if let Some(q) = &fm.q {
-            a += p[lay.g_off() + f] * p[lay.k_off() + c] * mean_direct(lay, p, q);
-        }
+        a += p[lay.k_off() + c] * light;
     }
     a
 }
 
 /// The coefficient vector `y_fc = (g_f vec(rho_c s^T), ambient_fc)` from the parameters.
-pub(crate) fn y_of(lay: &Layout, p: &[f64], fm: &FrameMoments, f: usize, c: usize) -> DVector<f64> {
+pub(crate) fn y_of(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize) -> DVector<f64> {
     let d = lay.d();
     let mut y = DVector::zeros(d + 1);
     let gf = p[lay.g_off() + f];
@@ -242,7 +220,7 @@ pub(crate) fn y_of(lay: &Layout, p: &[f64], fm: &FrameMoments, f: usize, c: usiz
             y[j * lay.ns + k] = gf * rho[j] * e;
         }
     }
-    y[d] = ambient_of(lay, p, fm, f, c);
+    y[d] = ambient_of(lay, p, light, f, c);
     y
 }
 
@@ -251,7 +229,7 @@ pub(crate) fn cost(lay: &Layout, m: &[FrameMoments], p: &[f64]) -> f64 {
     let mut total = 0.0;
     for (f, fm) in m.iter().enumerate() {
         for c in 0..3 {
-            let y = y_of(lay, p, fm, f, c);
+            let y = y_of(lay, p, fm.light, f, c);
             let gy = fm.g(c) * &y;
             total += y.dot(&gy) - 2.0 * fm.h[c].dot(&y) + fm.s[c];
         }
@@ -274,28 +252,19 @@ pub(crate) fn normal_equations(
     for (f, fm) in m.iter().enumerate() {
         let gf = p[lay.g_off() + f];
         for c in 0..3 {
-            let y = y_of(lay, p, fm, f, c);
+            let y = y_of(lay, p, fm.light, f, c);
             let gm = fm.g(c);
             let gy = gm * &y;
             total += y.dot(&gy) - 2.0 * fm.h[c].dot(&y) + fm.s[c];
             let r = gy - &fm.h[c];
-            // Local Jacobian dy/dparams: rho (channel c, or all channels with the
-            // inter-reflection term, whose M_f depends on every channel), s_1.., g_f, a_fc, kappa_c.
-            let ir = lay.interreflection && fm.q.is_some();
-            let rho_channels: Vec<usize> = if ir { vec![0, 1, 2] } else { vec![c] };
-            let mut idx: Vec<usize> = rho_channels
-                .iter()
-                .flat_map(|&cc| (0..lay.nr).map(move |j| lay.c_off(cc) + j))
-                .collect();
-            let rn = idx.len();
-            let own = if ir { c * lay.nr } else { 0 };
+            // Local Jacobian dy/dparams: rho_c, s_1.., g_f, a_fc.
+            let mut idx: Vec<usize> = (0..lay.nr).map(|j| lay.c_off(c) + j).collect();
             idx.extend((1..lay.ns).map(|k| lay.e_off() + k - 1));
-            let g_col = idx.len();
             idx.push(lay.g_off() + f);
             if lay.ambient {
                 idx.push(lay.a_off() + 3 * f + c);
             }
-            if ir {
+            if lay.interreflection {
                 idx.push(lay.k_off() + c);
             }
             let mut jac = DMatrix::zeros(d + 1, idx.len());
@@ -304,39 +273,18 @@ pub(crate) fn normal_equations(
                 for k in 0..lay.ns {
                     let e = if k == 0 { 1.0 } else { p[lay.e_off() + k - 1] };
                     let row = j * lay.ns + k;
-                    jac[(row, own + j)] = gf * e;
+                    jac[(row, j)] = gf * e;
                     if k > 0 {
-                        jac[(row, rn + k - 1)] = gf * rho[j];
+                        jac[(row, lay.nr + k - 1)] = gf * rho[j];
                     }
-                    jac[(row, g_col)] = rho[j] * e;
+                    jac[(row, lay.nr + lay.ns - 1)] = rho[j] * e;
                 }
             }
             if lay.ambient {
-                jac[(d, g_col + 1)] = 1.0;
+                jac[(d, lay.nr + lay.ns)] = 1.0;
             }
-            if ir {
-                let q = fm.q.as_ref().expect("checked");
-                let kappa = p[lay.k_off() + c];
-                let e = DVector::from_vec(s_full(lay, p));
-                let qe = q * &e;
-                let mf = mean_direct(lay, p, q);
-                for cc in 0..3 {
-                    for j in 0..lay.nr {
-                        jac[(d, cc * lay.nr + j)] = gf * kappa * LUMA[cc] * qe[j];
-                    }
-                }
-                for k in 1..lay.ns {
-                    let mut v = 0.0;
-                    for cc in 0..3 {
-                        let rc = &p[lay.c_off(cc)..lay.c_off(cc) + lay.nr];
-                        for j in 0..lay.nr {
-                            v += LUMA[cc] * rc[j] * q[(j, k)];
-                        }
-                    }
-                    jac[(d, rn + k - 1)] = gf * kappa * v;
-                }
-                jac[(d, g_col)] = kappa * mf;
-                jac[(d, idx.len() - 1)] = gf * mf;
+            if lay.interreflection {
+                jac[(d, idx.len() - 1)] = fm.light;
             }
             let gj = gm * &jac;
             let hl = jac.transpose() * gj;
@@ -350,29 +298,4 @@ pub(crate) fn normal_equations(
         }
     }
     (hm, grad, total.max(0.0))
-}
-
-/// Per frame, the mean over its surface geometry samples of `B(gamma) B(t)^T / z^2` (nr x ns).
-pub(crate) fn q_of(samples: &PooledSamples, cos_edge: f64, lay: &Layout) -> Vec<DMatrix<f64>> {
-    let span = (1.0 - cos_edge).max(1e-12);
-    (0..samples.frames())
-        .into_par_iter()
-        .map(|f| {
-            let mut q = DMatrix::zeros(lay.nr, lay.ns);
-            let (mut bg, mut bt) = (vec![0.0; lay.nr], vec![0.0; lay.ns]);
-            let geo = samples.geometry_of(f);
-            for g in geo {
-                let t = ((1.0 - f64::from(g[1])) / span).clamp(0.0, 1.0);
-                basis_into(f64::from(g[0]).clamp(0.0, 1.0), &mut bg);
-                basis_into(t, &mut bt);
-                let inv = 1.0 / f64::from(g[2]).powi(2);
-                for j in 0..lay.nr {
-                    for k in 0..lay.ns {
-                        q[(j, k)] += bg[j] * bt[k] * inv;
-                    }
-                }
-            }
-            q / geo.len().max(1) as f64
-        })
-        .collect()
 }

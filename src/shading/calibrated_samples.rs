@@ -7,6 +7,7 @@
 // `!(x > t)` on floats is deliberate: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+use super::frame_shading::LUMA;
 use super::samples::{ExclusionCounts, SampleOptions};
 use super::weights::WeightOptions;
 use crate::{Error, Result};
@@ -72,16 +73,10 @@ pub struct PooledSamples {
     pub frame_start: Vec<usize>,
     /// Pixels excluded per frame, by reason (subsampling does not count as exclusion).
     pub excluded: Vec<ExclusionCounts>,
-    /// (cos gamma, cos theta, z) of every `GEOMETRY_STRIDE`-th surface pixel of each frame,
-    /// whatever its intensity (saturated, dark or grazing too): the frame's whole view, for
-    /// the inter-reflection term's mean direct light.
-    pub geometry: Vec<[f32; 3]>,
-    /// `geometry_start[f]..geometry_start[f + 1]` are frame f's geometry samples.
-    pub geometry_start: Vec<usize>,
+    /// Per frame, the mean observed luminance (Rec. 709) over all its surface pixels, whatever
+    /// their intensity: the light the frame's view holds, which inter-reflection scales with.
+    pub frame_light: Vec<f64>,
 }
-
-/// Every this many pixels (raster order) one geometry sample.
-pub const GEOMETRY_STRIDE: usize = 7;
 
 impl PooledSamples {
     /// Number of samples.
@@ -128,22 +123,8 @@ impl PooledSamples {
         self.frame_start
             .extend(other.frame_start.iter().skip(1).map(|s| s + offset));
         self.excluded.extend(other.excluded);
-        if self.geometry_start.is_empty() {
-            self.geometry_start.push(0);
-        }
-        let goff = self.geometry.len();
-        self.geometry.extend_from_slice(&other.geometry);
-        self.geometry_start
-            .extend(other.geometry_start.iter().skip(1).map(|s| s + goff));
+        self.frame_light.extend(other.frame_light);
         Ok(())
-    }
-
-    /// Frame f's geometry samples (empty when none were pooled).
-    pub fn geometry_of(&self, f: usize) -> &[[f32; 3]] {
-        match (self.geometry_start.get(f), self.geometry_start.get(f + 1)) {
-            (Some(&a), Some(&b)) => &self.geometry[a..b],
-            _ => &[],
-        }
     }
 
     /// Smallest cos theta among the samples (the fit's angular edge).
@@ -216,7 +197,6 @@ pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSam
         .collect();
     let mut out = PooledSamples {
         frame_start: vec![0],
-        geometry_start: vec![0],
         ..Default::default()
     };
     if with_texels {
@@ -253,14 +233,15 @@ pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSam
         }
         out.excluded.push(ex);
         out.frame_start.push(out.gamma.len());
-        for i in (0..fr.gamma.len()).step_by(GEOMETRY_STRIDE) {
-            let zi = fr.z[i];
-            if zi.is_finite() && zi > 0.0 && fr.cos_theta[i].is_finite() {
-                out.geometry
-                    .push([fr.gamma[i].clamp(0.0, 1.0), fr.cos_theta[i], zi]);
+        let (mut sum, mut count) = (0.0f64, 0usize);
+        for (i, &zi) in fr.z.iter().enumerate() {
+            if zi.is_finite() && zi > 0.0 {
+                let px = &fr.rgb[3 * i..3 * i + 3];
+                sum += (0..3).map(|c| LUMA[c] * f64::from(px[c])).sum::<f64>();
+                count += 1;
             }
         }
-        out.geometry_start.push(out.geometry.len());
+        out.frame_light.push(sum / count.max(1) as f64);
     }
     Ok(out)
 }
