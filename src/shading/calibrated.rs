@@ -6,7 +6,9 @@
 //! the mean albedo); s is the light's angular profile times the lens vignetting, a Bernstein
 //! polynomial in cos(theta) shared by the channels with s = 1 on the optical axis; z is the
 //! absolute distance (mm, never normalised or clamped); g_f is the frame's auto-exposure gain
-//! (1 for the reference frame); a_f the optional inter-reflected light of frame f.
+//! (1 for the reference frame); a_f the inter-reflected light of frame f: by default
+//! `kappa_c · L_f`, three parameters for the video times the frame's mean observed luminance
+//! (see `calibrated_fit::CalibratedOptions::interreflection`), or free per frame (`--ambient`).
 
 use serde::{Deserialize, Serialize};
 
@@ -66,7 +68,7 @@ pub struct CalibratedModel {
     /// Index of the frame whose gain is fixed to 1.
     pub reference_frame: usize,
     /// Inter-reflected light a_f per fitted frame and channel (linear intensity at that frame's
-    /// gain), when the fit kept it.
+    /// gain), when the fit kept it (`kappa_c · L_f` by default).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ambient: Option<Vec<[f64; 3]>>,
     /// Weighted RMS residual per channel over the fitted samples (linear intensity), with the
