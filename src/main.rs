@@ -114,6 +114,10 @@ enum Command {
         /// observed light, 3 parameters for the whole video; on by default, see BENCHMARKS.md).
         #[arg(long)]
         no_interreflection: bool,
+        /// Rounds of refitting the calibrated light's shape with the fused texture's albedo
+        /// (each followed by a gain correction; 0 keeps the uniform-albedo light).
+        #[arg(long, default_value_t = 2)]
+        light_refits: usize,
         /// Hold out every N-th frame to cross-validate both shading models (0: skip).
         #[arg(long, default_value_t = 5)]
         cross_validate_every: usize,
@@ -311,6 +315,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             cross_validate_every,
             ambient,
             no_interreflection,
+            light_refits,
             truth,
             force,
         } => {
@@ -331,6 +336,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             opts.segment.mesh.decimate.target_edge_mm = edge_mm;
             opts.calibrated.ambient = ambient;
             opts.calibrated.interreflection = !no_interreflection;
+            opts.refine_light = light_refits;
             opts.fusion.method = match fusion.as_str() {
                 "max" => bronchosim::texture::fusion::FusionMethod::MaxWeightSmoothed {
                     sigma_texels: 2.0,

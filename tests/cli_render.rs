@@ -177,24 +177,22 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
         100.0 * cone_rms,
         theta_edge.to_degrees()
     );
-    // Issue 8 aims at 5%. Measured 5.87% with the inter-reflection term (the default), 2.18%
-    // without it; but without it this phantom's 2% was luck of its albedo: on the 80-frame
-    // demo phantom seeds 2 and 3 measure 10.4% and 11.3% without the term, 4.9% and 5.8%
-    // with it, and with a uniform albedo 4.8% without and 0.15% with (BENCHMARKS.md
-    // "Inter-reflection"). What bends the profile is the albedo's slow variation (chiefly the
-    // vessel density) that a single video's centre and edge pixels see differently.
-    assert!(cone_rms < 0.07, "cone RMS {cone_rms}");
+    // Issue 8 aims at 5%. Measured 0.17% (the light's shape refitted with the fused texture's
+    // albedo, workflow::light_refine); 5.87% from the uniform-albedo fit with the
+    // inter-reflection term, 2.18% without that term (by luck of this albedo: on the 80-frame
+    // demo phantom seeds 2 and 3 measure 10-11% without it; BENCHMARKS.md "Inter-reflection").
+    assert!(cone_rms < 0.02, "cone RMS {cone_rms}");
     // Issue 8 aims at 2% per gain; measured here (24 frames, reference = the middle frame):
-    // worst 7.5%, RMS 3.2%; with the global scale fitted worst 7.6%, RMS 3.2% (7.4% / 3.1%
-    // without the inter-reflection term; before the Huber loss and the second correction:
-    // 9.8% / 4.1% and 7.5% / 3.5%). Under the uniform-albedo
-    // fit each frame's gain absorbs the mean albedo of the mucosa it sees (vessels, pale
-    // patches); the corrections against the fused texture (workflow::gain_refine) remove the
-    // frame-to-frame part, not the albedo's slow variation that neighbouring frames share. The
-    // bounds pin today's level so a regression shows.
-    assert!(rms_gain < 0.04, "gain RMS error {rms_gain}");
+    // worst 7.6%, RMS 2.65%; with the global scale fitted worst 6.9%, RMS 2.5% (7.5% / 3.2%
+    // before the light's refit with the fused albedo, 7.4% / 3.1% without the inter-reflection
+    // term; before the Huber loss and the second correction: 9.8% / 4.1% and 7.5% / 3.5%).
+    // Under the uniform-albedo fit each frame's gain absorbs the mean albedo of the mucosa it
+    // sees (vessels, pale patches); the corrections against the fused texture
+    // (workflow::gain_refine) remove the frame-to-frame part, not the albedo's slow variation
+    // that neighbouring frames share. The bounds pin today's level so a regression shows.
+    assert!(rms_gain < 0.032, "gain RMS error {rms_gain}");
     assert!(
-        rms_scaled < 0.04,
+        rms_scaled < 0.032,
         "gain RMS error, global scale fitted: {rms_scaled}"
     );
 
@@ -330,13 +328,15 @@ fn demo_phantom_albedo_is_within_ten_percent() {
         100.0 * e.relative_rms,
         e.pixels
     );
-    // Measured 9.89% (9.75% without the inter-reflection term; release and test builds alike).
+    // Measured 9.95% (9.89% before the light's refit, 9.75% without the inter-reflection term;
+    // release and test builds alike).
     assert!(e.pixels > 700_000, "{} pixels compared", e.pixels);
     assert!(e.relative_rms < 0.10, "{}", e.relative_rms);
-    // Issue 8 aims at 2%; measured worst 6.5% (frame 0, the top of the trachea that no other
-    // frame sees), RMS 2.14% relative to the reference (the middle frame), 5.9% / 2.0% with
-    // the global scale fitted; without the inter-reflection term 4.6% / 2.3%. The bounds pin
-    // today's level.
+    // Issue 8 aims at 2%; measured worst 4.28% (frame 0, the top of the trachea that no other
+    // frame sees), RMS 1.85% relative to the reference (the middle frame), 3.4% / 1.6% with the
+    // global scale fitted (6.5% / 2.14% before the light's refit with the fused albedo; 4.6% /
+    // 2.3% without the inter-reflection term). The bounds pin today's level: the RMS within
+    // 2%, not yet every frame.
     let g = gain_errors(dir);
     println!(
         "demo-size phantom: gains worst {:.2}%, RMS {:.2}% relative to the reference; {:.2}% / \
@@ -347,7 +347,7 @@ fn demo_phantom_albedo_is_within_ten_percent() {
         100.0 * g.rms_scaled
     );
     assert!(
-        g.worst < 0.07 && g.rms < 0.025,
+        g.worst < 0.05 && g.rms < 0.02,
         "{:.4} {:.4}",
         g.worst,
         g.rms
@@ -355,7 +355,8 @@ fn demo_phantom_albedo_is_within_ten_percent() {
     // The floor under those errors: each frame's residual with the true gains and the true
     // albedo (every 8th frame). The phantom's own light law on its true mesh explains every
     // frame (this checks the truth record: gains, light, albedo seed, conventions); on the
-    // CT-derived mesh the geometry alone leaves about 1%, and the fitted light about as much.
+    // CT-derived mesh the phantom's own law leaves 0.76% RMS (1.9% worst), the fitted light
+    // 0.58% (1.2%): it absorbs part of the CT geometry's bias.
     let case = bronchosim::io::case::Case::open(&dir.join("case")).unwrap();
     let truth = dir.join("case/truth");
     let true_mesh = bronchosim::io::mesh_export::read_ply(&truth.join("lumen.ply")).unwrap();

@@ -16,7 +16,7 @@ use crate::model::manifest::{
 };
 use crate::model::Model;
 use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
-use crate::render::triangle_uvs;
+use crate::render::{triangle_uvs, MipOptions, MipTexture};
 use crate::shading::calibrated_fit::{fit_calibrated, CalibratedOptions};
 use crate::shading::calibrated_predict::cos_theta_of;
 use crate::shading::calibrated_samples::{
@@ -26,13 +26,15 @@ use crate::shading::fit::{fit_psi, FitOptions};
 use crate::shading::psi::PsiModel;
 use crate::shading::samples::{extract_samples, SampleOptions, SampleSet};
 use crate::shading::weights::{density_weights, WeightOptions};
+use crate::shading::CalibratedModel;
 use crate::texture::atlas::{build_atlas, rasterize_texels, AtlasOptions};
-use crate::texture::fusion::{fuse, FusionMethod, FusionOptions};
+use crate::texture::fusion::{fuse, FusedTexture, FusionMethod, FusionOptions};
 use crate::texture::output::{encode_albedo, write_texture_outputs};
 use crate::texture::texels::TexelSet;
 use crate::workflow::build_frames::{CaseFrames, DepthCache, FrameShadingSource};
 use crate::workflow::cross_validate::{cross_validate, CrossValidationInputs};
 use crate::workflow::gain_refine::refine_gains_against_texture;
+use crate::workflow::light_refine::{refit_light_with_albedo, sample_albedo, sample_uvs};
 use crate::workflow::new_views_figure::{novel_figure, truth_figure};
 use crate::workflow::progress::Progress;
 use crate::workflow::report::{write_report, ReportFrame, ReportInputs};
@@ -81,6 +83,10 @@ pub struct BuildOptions {
     pub max_pooled_samples: usize,
     /// Rounds of correcting the calibrated light's gains against a texture fused with them.
     pub refine_gains: usize,
+    /// Rounds, after those, of refitting the calibrated light's shape (rho, s, kappa) with each
+    /// sample's albedo from a texture fused with it, each followed by one more gain correction
+    /// (`workflow::light_refine`).
+    pub refine_light: usize,
     /// Hold out every k-th frame for the cross-validation (0: no cross-validation).
     pub cross_validate_every: usize,
     /// Most frames held out.
@@ -126,6 +132,7 @@ impl Default for BuildOptions {
             pool: PoolOptions::default(),
             max_pooled_samples: 4_000_000,
             refine_gains: 2,
+            refine_light: 2,
             cross_validate_every: 5,
             cross_validate_max_frames: 24,
             depth_cache_bytes: 1 << 30,
@@ -240,6 +247,9 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     let mut pixel_sum = [0f64; 3];
     let cos_theta = cos_theta_of(&rays);
     let mut pooled = PooledSamples::default();
+    // Where each pooled sample lies in the texture atlas (for the light's refit).
+    let tri_uv = triangle_uvs(&atlas);
+    let mut sample_uv: Vec<[f32; 2]> = Vec::new();
     let mut cache = DepthCache::new(n, opts.depth_cache_bytes);
     // The pooled fit's memory and time grow with its samples: a long video keeps fewer per frame.
     let pool = PoolOptions {
@@ -267,7 +277,9 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
                 rgb: &frame.rgb,
                 texel: None,
             };
-            pooled.append(pool_frames(&[data], &pool)?)?;
+            let part = pool_frames(&[data], &pool)?;
+            sample_uv.extend(sample_uvs(&part.pixel, &g, &tri_uv));
+            pooled.append(part)?;
         }
         cache.offer(i, &g.z);
         if i % report_every == 0 && report_frames.len() < 3 {
@@ -288,17 +300,17 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
 
     // The calibrated light of the whole video, on the pooled samples.
     let t = Instant::now();
-    let calibrated = if pooled.is_empty() {
+    let density = density_weights_3d(&pooled, &WeightOptions::default());
+    // The reference gain (g = 1, the exposure new views are rendered at): the middle frame
+    // unless set, because a frame mid-video shares the most surface with the others (the
+    // first frame sees the cut top of the trachea, which no other frame sees).
+    let cal_opts = CalibratedOptions {
+        reference_frame: opts.calibrated_reference.unwrap_or(n / 2).min(n - 1),
+        ..opts.calibrated.clone()
+    };
+    let mut calibrated = if pooled.is_empty() {
         None
     } else {
-        let density = density_weights_3d(&pooled, &WeightOptions::default());
-        // The reference gain (g = 1, the exposure new views are rendered at): the middle frame
-        // unless set, because a frame mid-video shares the most surface with the others (the
-        // first frame sees the cut top of the trachea, which no other frame sees).
-        let cal_opts = CalibratedOptions {
-            reference_frame: opts.calibrated_reference.unwrap_or(n / 2).min(n - 1),
-            ..opts.calibrated.clone()
-        };
         match fit_calibrated(&pooled, &density, &cal_opts) {
             Ok(fit) => Some(fit.model),
             Err(e) if opts.shading == ShadingChoice::Calibrated => {
@@ -312,44 +324,47 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
             }
         }
     };
-    drop(pooled);
-    // Corrections of the gains against a texture fused with them (see gain_refine).
-    let mut calibrated = calibrated;
-    for _ in 0..if calibrated.is_some() {
-        opts.refine_gains
-    } else {
-        0
-    } {
-        let model = calibrated.as_mut().expect("checked above");
-        let first = model.clone();
-        // The reference texture is the plain predicted-intensity average (one pass, every
-        // frame's share in every texel): a consensus, not the sharpest texture.
-        let consensus = FusionOptions {
-            method: FusionMethod::WeightedAverage {
-                weight_exponent: 1.0,
+    if let Some(model) = calibrated.as_mut() {
+        let refine = LightRefinement {
+            case: &case,
+            scene: &scene,
+            rays: &rays,
+            cache: &cache,
+            texels: &texels,
+            // The reference texture is the plain predicted-intensity average (one pass, every
+            // frame's share in every texel): a consensus, not the sharpest texture.
+            consensus: FusionOptions {
+                method: FusionMethod::WeightedAverage {
+                    weight_exponent: 1.0,
+                },
+                ..opts.fusion.clone()
             },
-            ..opts.fusion.clone()
+            quiet: opts.quiet,
         };
-        let mut stream = CaseFrames::new(
-            &case,
-            &scene,
-            &rays,
-            FrameShadingSource::Calibrated(&first),
-            &cache,
-            (0..n).collect(),
-            Progress::new(
-                "refine gains",
-                ((consensus.method.passes() + 1) * n) as u64,
-                opts.quiet,
-            ),
-        );
-        let fused = fuse(&texels, &mut stream, &consensus)?;
-        refine_gains_against_texture(model, &texels, &fused, &mut stream, &consensus.delight)?;
-        stream.progress.finish();
+        // Corrections of the gains against a texture fused with them (see gain_refine)...
+        for _ in 0..opts.refine_gains {
+            refine.correct_gains(model)?;
+        }
+        // ...then refits of the light's shape with the fused texture's albedo (see
+        // light_refine), each followed by one more gain correction.
+        for _ in 0..opts.refine_light {
+            let fused = refine.fuse(model, "refit light")?;
+            let image = Frame {
+                width: atlas.width,
+                height: atlas.height,
+                rgb: fused.filled(&texels)?,
+            };
+            let texture =
+                MipTexture::new(&image, None, opts.atlas.texel_mm, &MipOptions::default())?;
+            let albedo = sample_albedo(&texture, &sample_uv);
+            refit_light_with_albedo(model, &pooled, &density, &albedo, &cal_opts)?;
+            refine.correct_gains(model)?;
+        }
     }
+    drop(pooled);
+    drop(sample_uv);
     timings.calibrated_fit = t.elapsed().as_secs_f64();
 
-    let tri_uv = triangle_uvs(&atlas);
     let t = Instant::now();
     let cross_validation = if opts.cross_validate_every > 0 {
         let inputs = CrossValidationInputs {
@@ -554,4 +569,60 @@ fn frame_name(case: &Case, i: usize) -> String {
 pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
     let text = serde_json::to_string_pretty(value).map_err(|e| Error::Other(e.to_string()))?;
     crate::io::atomic::write_bytes_atomic(path, text.as_bytes())
+}
+
+/// What the calibrated light's refinements stream the frames with.
+struct LightRefinement<'a> {
+    case: &'a Case,
+    scene: &'a Scene,
+    rays: &'a RayTable,
+    cache: &'a DepthCache,
+    texels: &'a TexelSet,
+    /// The fusion of the reference textures.
+    consensus: FusionOptions,
+    quiet: bool,
+}
+
+impl LightRefinement<'_> {
+    fn frames<'b>(
+        &'b self,
+        model: &'b CalibratedModel,
+        label: &str,
+        passes: usize,
+    ) -> CaseFrames<'b> {
+        let n = self.case.frame_count();
+        CaseFrames::new(
+            self.case,
+            self.scene,
+            self.rays,
+            FrameShadingSource::Calibrated(model),
+            self.cache,
+            (0..n).collect(),
+            Progress::new(label, (passes * n) as u64, self.quiet),
+        )
+    }
+
+    /// The consensus texture of every frame de-lit with `model`.
+    fn fuse(&self, model: &CalibratedModel, label: &str) -> Result<FusedTexture> {
+        let mut stream = self.frames(model, label, self.consensus.method.passes());
+        let fused = fuse(self.texels, &mut stream, &self.consensus)?;
+        stream.progress.finish();
+        Ok(fused)
+    }
+
+    /// One correction of `model`'s gains against the consensus texture fused with it.
+    fn correct_gains(&self, model: &mut CalibratedModel) -> Result<()> {
+        let first = model.clone();
+        let mut stream = self.frames(&first, "refine gains", self.consensus.method.passes() + 1);
+        let fused = fuse(self.texels, &mut stream, &self.consensus)?;
+        refine_gains_against_texture(
+            model,
+            self.texels,
+            &fused,
+            &mut stream,
+            &self.consensus.delight,
+        )?;
+        stream.progress.finish();
+        Ok(())
+    }
 }

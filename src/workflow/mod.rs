@@ -8,6 +8,7 @@ pub mod cross_validate;
 pub mod demo;
 pub mod flythrough;
 pub mod gain_refine;
+pub mod light_refine;
 pub mod new_views_figure;
 pub mod progress;
 pub mod render;
