@@ -54,6 +54,20 @@ fn phantom_then_build_writes_the_model_folder() {
     assert!(m["atlas_mean_l2_stretch"].as_f64().unwrap() < 1.1);
     let total = m["timings"]["total"].as_f64().unwrap();
     assert!(total > 0.0);
+    // How the calibrated light was fitted: the build's defaults.
+    let lf = &m["light_fit"];
+    assert_eq!(lf["interreflection"], true);
+    assert_eq!(lf["ambient_per_frame"], false);
+    assert_eq!(lf["robust"], "huber 1.345");
+    assert_eq!(
+        (lf["rho_degree"].as_u64(), lf["s_degree"].as_u64()),
+        (Some(3), Some(3))
+    );
+    assert_eq!(
+        (lf["gain_corrections"].as_u64(), lf["light_refits"].as_u64()),
+        (Some(2), Some(2))
+    );
+    assert_eq!(lf["reference_frame"], 4);
 
     // shading.json: one Psi per frame, at that frame's pose.
     let s: serde_json::Value =

@@ -89,12 +89,37 @@ pub struct ModelManifest {
     pub paper_texture: Option<ExtraTexture>,
     /// Held-out frame prediction per shading model (absent when not run).
     pub cross_validation: Option<CrossValidation>,
+    /// How the calibrated light was fitted (absent when it was not, and in older models).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_fit: Option<LightFitSettings>,
     /// What the build could not do as asked (e.g. a failed calibrated fit).
     pub warnings: Vec<String>,
     /// Mean L2 stretch of the atlas.
     pub atlas_mean_l2_stretch: f64,
     /// Atlas utilisation (covered / all texels).
     pub atlas_utilisation: f64,
+}
+
+/// The settings the calibrated light was fitted with (`build` options), for reproducing a model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LightFitSettings {
+    /// Degree of rho(gamma) per channel.
+    pub rho_degree: usize,
+    /// Degree of s in cos theta.
+    pub s_degree: usize,
+    /// Robust loss of the pooled fit ("none", "huber 1.345", "tukey 4.685").
+    pub robust: String,
+    /// Free inter-reflection term a_f per frame (`--ambient`).
+    pub ambient_per_frame: bool,
+    /// Inter-reflection term kappa times the frame's mean light (off with `--no-interreflection`).
+    pub interreflection: bool,
+    /// Frame whose gain is 1 (the exposure of new views).
+    pub reference_frame: usize,
+    /// Gain corrections against the fused texture before the light's refits.
+    pub gain_corrections: usize,
+    /// Refits of the light's shape with the fused texture's albedo (`--light-refits`), each
+    /// followed by one more gain correction.
+    pub light_refits: usize,
 }
 
 /// File name of the paper's texture beside a calibrated model's albedo.png.

@@ -11,8 +11,8 @@ use crate::io::nifti::write_nifti;
 use crate::io::output_dir::OutputDir;
 use crate::math::Affine;
 use crate::model::manifest::{
-    relative_path, BuildTimings, ExtraTexture, FrameFit, ModelCounts, ModelInputs, ModelManifest,
-    ShadingFile, MODEL_FORMAT_VERSION, PAPER_TEXTURE_FILE,
+    relative_path, BuildTimings, ExtraTexture, FrameFit, LightFitSettings, ModelCounts,
+    ModelInputs, ModelManifest, ShadingFile, MODEL_FORMAT_VERSION, PAPER_TEXTURE_FILE,
 };
 use crate::model::Model;
 use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
@@ -22,6 +22,7 @@ use crate::shading::calibrated_predict::cos_theta_of;
 use crate::shading::calibrated_samples::{
     density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples,
 };
+use crate::shading::fit::Robust;
 use crate::shading::fit::{fit_psi, FitOptions};
 use crate::shading::psi::PsiModel;
 use crate::shading::samples::{extract_samples, SampleOptions, SampleSet};
@@ -363,6 +364,20 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     }
     drop(pooled);
     drop(sample_uv);
+    let light_fit = calibrated.as_ref().map(|m| LightFitSettings {
+        rho_degree: cal_opts.rho_degree,
+        s_degree: cal_opts.s_degree,
+        robust: match cal_opts.robust {
+            Robust::None => "none".to_string(),
+            Robust::Huber(k) => format!("huber {k}"),
+            Robust::Tukey(c) => format!("tukey {c}"),
+        },
+        ambient_per_frame: cal_opts.ambient,
+        interreflection: cal_opts.interreflection,
+        reference_frame: m.reference_frame,
+        gain_corrections: opts.refine_gains,
+        light_refits: opts.refine_light,
+    });
     timings.calibrated_fit = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
@@ -492,6 +507,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         shading_model,
         paper_texture,
         cross_validation,
+        light_fit,
         warnings,
         atlas_mean_l2_stretch: atlas.stats.mean_l2_stretch,
         atlas_utilisation: atlas.stats.utilisation,
