@@ -14,9 +14,8 @@
 //!
 //! The albedo is unknown. [`fit_calibrated`] assumes its low-frequency mean is uniform (the
 //! paper's assumption; the mean folds into rho and the robust weights discount vessels).
-//! [`refine_with_texels`] then alternates: de-light every sample with the current light,
-//! average the de-lit values per texel (surface points seen in several frames share one
-//! albedo), refit the light with that per-sample albedo.
+//! [`fit_calibrated_with_albedo`] refits with a known per-sample albedo: the build takes it
+//! from a texture fused with the first light (`workflow::light_refine`).
 
 // Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
 #![allow(clippy::needless_range_loop)]

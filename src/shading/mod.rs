@@ -7,7 +7,8 @@
 //!
 //! Beyond the paper, [`calibrated`]: one light model for the whole video (rho(gamma), the
 //! light's angular profile s(theta), absolute 1/z², a gain per frame), fitted on samples pooled
-//! over all frames by [`fit_calibrated`] / [`refine_with_texels`]; [`calibrated_plots`] draws it.
+//! over all frames by [`fit_calibrated`] (and refitted with a known albedo by
+//! [`fit_calibrated_with_albedo`]); [`calibrated_plots`] draws it.
 
 pub mod bernstein;
 pub mod calibrated;
@@ -15,7 +16,6 @@ pub mod calibrated_fit;
 mod calibrated_moments;
 pub mod calibrated_plots;
 pub mod calibrated_predict;
-pub mod calibrated_refine;
 pub mod calibrated_samples;
 pub mod fit;
 pub mod frame_shading;
@@ -30,7 +30,6 @@ pub use calibrated_fit::{
     fit_calibrated, fit_calibrated_with_albedo, CalibratedFit, CalibratedOptions, CalibratedReport,
 };
 pub use calibrated_predict::{cos_theta_of, fit_gain, predict_frame, predict_pixels, psnr, Albedo};
-pub use calibrated_refine::{refine_with_texels, RefineRound, RefinedFit};
 pub use calibrated_samples::{
     density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples,
 };

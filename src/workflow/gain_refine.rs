@@ -7,7 +7,7 @@
 //! least `min_frames` frames saw). The build makes two steps (the texture includes the frame
 //! itself, so one step recovers only part of the error); many steps tie every frame to its
 //! neighbours and let small biases of the light model accumulate along the video (see
-//! `shading::calibrated_refine`). Measured on the 80-frame demo, gains RMS relative to the
+//! BENCHMARKS.md, the texel-linked solve). Measured on the 80-frame demo, gains RMS relative to the
 //! reference: 1 step 2.8%, 2 steps 2.3%, 3 steps 2.2% but worst frame 4.6% -> 5.5%.
 
 use crate::shading::frame_shading::LUMA;

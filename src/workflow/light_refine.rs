@@ -10,7 +10,7 @@
 //! angles and distances, so the refit sees each texel's own brightness instead of a uniform
 //! one; the gains are kept (refitting them too chains the frames through the surface they
 //! share, and small biases of the CT geometry accumulate along the video: see
-//! `shading::calibrated_refine`). Measured on the 80-frame demo phantom, two rounds (each
+//! BENCHMARKS.md, the texel-linked solve). Measured on the 80-frame demo phantom, two rounds (each
 //! followed by a gain correction): cone profile 6.9% -> 0.4% RMS, gains RMS 2.14% -> 1.85%,
 //! truth views 31.99 -> 32.54 dB; seeds 2 and 3 alike (BENCHMARKS.md).
 
