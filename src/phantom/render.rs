@@ -83,6 +83,30 @@ impl LightModel {
         let diffuse = (1.0 - self.f0) * g / std::f64::consts::PI;
         (diffuse, spec)
     }
+
+    /// Direct radiance (unit gain, linear RGB) of a surface of linear `albedo` at distance `z`
+    /// (mm), `cos_gamma` between its normal and the ray, seen along a ray `cos_theta` off the
+    /// optical axis; `k` is [`cone_exponent`](Self::cone_exponent).
+    #[inline]
+    pub fn direct_radiance(
+        &self,
+        albedo: [f32; 3],
+        cos_theta: f64,
+        cos_gamma: f64,
+        z: f64,
+        k: f64,
+    ) -> [f64; 3] {
+        let e = self.intensity * self.cone(cos_theta, k) / (z * z).max(1e-6);
+        let (dif, spec) = self.brdf_cos(cos_gamma);
+        albedo.map(|c| e * (c as f64 * dif + spec))
+    }
+
+    /// The inter-reflected irradiance of a frame whose mean direct luminance is
+    /// `mean_direct_luminance`: every surface pixel adds this times its albedo.
+    #[inline]
+    pub fn interreflection(&self, mean_direct_luminance: f64) -> f64 {
+        self.ambient_fraction * mean_direct_luminance / 0.3
+    }
 }
 
 /// The sensor: auto-gain, noise, saturation.
@@ -183,11 +207,10 @@ pub fn render_radiance(
                 p[1] as f64,
                 p[2] as f64,
             ));
-            let z = gb.z[i] as f64;
             let cos_t = rays.table.dirs[i][2] as f64;
-            let e = light.intensity * light.cone(cos_t, k) / (z * z).max(1e-6);
-            let (dif, spec) = light.brdf_cos(gb.gamma[i] as f64);
-            let l = a.map(|c| (e * (c as f64 * dif + spec)) as f32);
+            let l = light
+                .direct_radiance(a, cos_t, gb.gamma[i] as f64, gb.z[i] as f64, k)
+                .map(|v| v as f32);
             (l, a, true)
         })
         .collect();
@@ -199,7 +222,7 @@ pub fn render_radiance(
         .map(|s| lum(&s.0) as f64)
         .sum::<f64>()
         / hits as f64;
-    let amb = (light.ambient_fraction * mean_direct / 0.3) as f32;
+    let amb = light.interreflection(mean_direct) as f32;
     let (w, h, ss) = (rays.width as usize, rays.height as usize, rays.ss as usize);
     let fw = w * ss;
     let norm = 1.0 / (ss * ss) as f32;

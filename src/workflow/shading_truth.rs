@@ -156,36 +156,33 @@ pub fn shading_residuals(
         .map(|(&f, frame)| {
             let gb = cast_frame_with(scene, &rays, &case.poses[f].camera_to_world);
             let hits: Vec<usize> = (0..gb.z.len()).filter(|&i| gb.hit(i)).collect();
-            let albedo: Vec<[f64; 3]> = hits
+            let albedo: Vec<[f32; 3]> = hits
                 .iter()
                 .map(|&i| {
                     let p = gb.point[i];
-                    let a = truth
+                    truth
                         .albedo
-                        .eval(Point3::new(p[0] as f64, p[1] as f64, p[2] as f64));
-                    a.map(f64::from)
+                        .eval(Point3::new(p[0] as f64, p[1] as f64, p[2] as f64))
                 })
                 .collect();
-            let phantom_direct = |k: usize, i: usize| -> [f64; 3] {
-                let l = &truth.light;
-                let z = gb.z[i] as f64;
-                let e = l.intensity * l.cone(rays.dirs[i][2] as f64, cone_k) / (z * z);
-                let (dif, spec) = l.brdf_cos(gb.gamma[i] as f64);
-                albedo[k].map(|a| e * (a * dif + spec))
+            // The phantom's direct radiance per hit and its inter-reflection (a fraction of the
+            // frame's mean direct luminance), as its renderer computes them.
+            let direct: Vec<[f64; 3]> = match law {
+                ShadingLaw::Phantom => hits
+                    .iter()
+                    .zip(&albedo)
+                    .map(|(&i, &a)| {
+                        let (cos_t, cos_g) = (rays.dirs[i][2] as f64, gb.gamma[i] as f64);
+                        truth
+                            .light
+                            .direct_radiance(a, cos_t, cos_g, gb.z[i] as f64, cone_k)
+                    })
+                    .collect(),
+                ShadingLaw::Fitted(_) => Vec::new(),
             };
-            // The phantom's inter-reflection: a fraction of the frame's mean direct luminance.
-            let ambient = match law {
-                ShadingLaw::Phantom => {
-                    let mean = hits
-                        .iter()
-                        .enumerate()
-                        .map(|(k, &i)| lum(phantom_direct(k, i)))
-                        .sum::<f64>()
-                        / hits.len().max(1) as f64;
-                    truth.light.ambient_fraction * mean / 0.3
-                }
-                ShadingLaw::Fitted(_) => 0.0,
-            };
+            let mean_direct =
+                direct.iter().map(|&d| lum(d)).sum::<f64>() / hits.len().max(1) as f64;
+            let ambient = truth.light.interreflection(mean_direct);
             let gain = truth.gains[f] / reference;
             let mut bins = vec![(0.0, 0usize); Z_BINS + 2 * ANGLE_BINS];
             let mut res = Vec::with_capacity(hits.len());
@@ -203,11 +200,11 @@ pub fn shading_residuals(
                         let s = m.eval_rgb(cos_g, cos_t, z, gain);
                         let a = m.ambient_of(f);
                         let to_gain = gain / m.gains[f];
-                        lum([0, 1, 2].map(|c| (s[c] + a[c] * to_gain) * albedo[k][c]))
+                        lum([0, 1, 2].map(|c| (s[c] + a[c] * to_gain) * albedo[k][c] as f64))
                     }
                     ShadingLaw::Phantom => {
-                        let d = phantom_direct(k, i);
-                        gain * lum([0, 1, 2].map(|c| d[c] + ambient * albedo[k][c]))
+                        let d = direct[k];
+                        gain * lum([0, 1, 2].map(|c| d[c] + ambient * albedo[k][c] as f64))
                     }
                 };
                 if pred.is_nan() || pred <= 0.0 {
