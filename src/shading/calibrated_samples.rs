@@ -166,17 +166,21 @@ pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSam
     }
     let with_texels = frames.iter().any(|f| f.texel.is_some());
     let so = &opts.sample;
-    let per_frame: Vec<(Vec<u32>, ExclusionCounts)> = frames
+    let per_frame: Vec<(Vec<u32>, ExclusionCounts, f64)> = frames
         .par_iter()
         .map(|fr| {
             let mut ex = ExclusionCounts::default();
             let mut keep = Vec::new();
+            let mut light = 0.0f64;
             for i in 0..fr.gamma.len() {
                 let zi = fr.z[i];
                 if !(zi.is_finite() && zi > 0.0) {
                     ex.no_hit += 1;
                     continue;
                 }
+                light += (0..3)
+                    .map(|c| LUMA[c] * f64::from(fr.rgb[3 * i + c]))
+                    .sum::<f64>();
                 if !(fr.gamma[i] >= so.min_gamma) || !fr.cos_theta[i].is_finite() {
                     ex.grazing += 1;
                     continue;
@@ -192,7 +196,8 @@ pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSam
                 }
                 keep.push(i as u32);
             }
-            (keep, ex)
+            let hits = fr.gamma.len() - ex.no_hit;
+            (keep, ex, light / hits.max(1) as f64)
         })
         .collect();
     let mut out = PooledSamples {
@@ -202,7 +207,7 @@ pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSam
     if with_texels {
         out.texel = Some(Vec::new());
     }
-    for (f, ((keep, ex), fr)) in per_frame.into_iter().zip(frames).enumerate() {
+    for (f, ((keep, ex, light), fr)) in per_frame.into_iter().zip(frames).enumerate() {
         let m = opts.max_per_frame.max(1);
         let chosen: Vec<u32> = if keep.len() <= m {
             keep
@@ -233,15 +238,7 @@ pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSam
         }
         out.excluded.push(ex);
         out.frame_start.push(out.gamma.len());
-        let (mut sum, mut count) = (0.0f64, 0usize);
-        for (i, &zi) in fr.z.iter().enumerate() {
-            if zi.is_finite() && zi > 0.0 {
-                let px = &fr.rgb[3 * i..3 * i + 3];
-                sum += (0..3).map(|c| LUMA[c] * f64::from(px[c])).sum::<f64>();
-                count += 1;
-            }
-        }
-        out.frame_light.push(sum / count.max(1) as f64);
+        out.frame_light.push(light);
     }
     Ok(out)
 }

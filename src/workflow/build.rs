@@ -279,7 +279,9 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
                 texel: None,
             };
             let part = pool_frames(&[data], &pool)?;
-            sample_uv.extend(sample_uvs(&part.pixel, &g, &tri_uv));
+            if opts.refine_light > 0 {
+                sample_uv.extend(sample_uvs(&part.pixel, &g, &tri_uv));
+            }
             pooled.append(part)?;
         }
         cache.offer(i, &g.z);
