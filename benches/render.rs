@@ -115,6 +115,8 @@ fn bench(c: &mut Criterion) {
         gains: vec![1.0],
         reference_frame: 0,
         ambient: None,
+        interreflection: None,
+        frame_light: None,
         rms_residual: [0.0; 3],
         samples_used: 0,
     };

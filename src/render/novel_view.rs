@@ -9,6 +9,7 @@ use crate::camera::Camera;
 use crate::io::frames::Frame;
 use crate::math::Affine;
 use crate::raycast::Scene;
+use crate::shading::frame_shading::LUMA;
 use crate::shading::psi::PsiModel;
 use crate::shading::CalibratedModel;
 use crate::texture::atlas::Atlas;
@@ -257,5 +258,40 @@ pub fn render_view_with(
                 }
             },
         );
+    if !opts.albedo_only {
+        if let ViewShader::Calibrated { model, .. } = &shade {
+            add_interreflection(model, &mut frame, &mask, opts.gain);
+        }
+    }
     Ok((frame, mask))
+}
+
+/// Add the calibrated light's inter-reflection for this view (`kappa_c` times the view's own
+/// mean luminance over its surface pixels; nothing when the model has no such term) to every
+/// pixel that sees the surface. `gain` is the gain the frame was rendered at.
+fn add_interreflection(model: &CalibratedModel, frame: &mut Frame, mask: &[bool], gain: f32) {
+    if model.interreflection.is_none() || gain <= 0.0 {
+        return;
+    }
+    let (sum, hits) = frame
+        .rgb
+        .chunks_exact(3)
+        .zip(mask)
+        .filter(|(_, &m)| m)
+        .fold((0.0f64, 0usize), |(s, n), (px, _)| {
+            let lum: f64 = (0..3).map(|c| LUMA[c] * f64::from(px[c])).sum();
+            (s + lum, n + 1)
+        });
+    if hits == 0 {
+        return;
+    }
+    let light_without = sum / hits as f64 / f64::from(gain);
+    let base = model.new_view_ambient();
+    let total = model.view_ambient(light_without);
+    let extra: [f32; 3] = std::array::from_fn(|c| ((total[c] - base[c]) * f64::from(gain)) as f32);
+    for (px, _) in frame.rgb.chunks_exact_mut(3).zip(mask).filter(|(_, &m)| m) {
+        for c in 0..3 {
+            px[c] += extra[c];
+        }
+    }
 }

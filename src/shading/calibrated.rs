@@ -10,6 +10,7 @@
 //! `kappa_c · L_f`, three parameters for the video times the frame's mean observed luminance
 //! (see `calibrated_fit::CalibratedOptions::interreflection`), or free per frame (`--ambient`).
 
+use super::frame_shading::LUMA;
 use serde::{Deserialize, Serialize};
 
 /// The Bernstein basis `B_i^n(t)`, `i = 0..=n`, of degree `n = out.len() - 1`, written into `out`.
@@ -71,6 +72,14 @@ pub struct CalibratedModel {
     /// gain), when the fit kept it (`kappa_c · L_f` by default).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ambient: Option<Vec<[f64; 3]>>,
+    /// kappa_c of the inter-reflection term `kappa_c · L_f` (unitless), when the fit had it.
+    /// A new view gets `kappa_c` times its own light (see [`Self::view_ambient`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interreflection: Option<[f64; 3]>,
+    /// L_f per fitted frame: its mean observed luminance over its surface pixels (linear
+    /// intensity at that frame's gain), when the fit had the inter-reflection term.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame_light: Option<Vec<f64>>,
     /// Weighted RMS residual per channel over the fitted samples (linear intensity), with the
     /// final fit weights (density x robust).
     pub rms_residual: [f64; 3],
@@ -139,8 +148,9 @@ impl CalibratedModel {
             .unwrap_or([0.0; 3])
     }
 
-    /// The ambient term for a new view at the reference gain: the median over fitted frames
-    /// of `a_f / g_f` per channel (zeros without an ambient term).
+    /// The part of a new view's ambient term that does not depend on its light, at the
+    /// reference gain: the median over fitted frames of `(a_f - kappa L_f) / g_f` per channel,
+    /// i.e. the free per-frame term when fitted (zeros without one).
     pub fn new_view_ambient(&self) -> [f64; 3] {
         let Some(a) = &self.ambient else {
             return [0.0; 3];
@@ -149,7 +159,8 @@ impl CalibratedModel {
             let mut v: Vec<f64> = a
                 .iter()
                 .zip(&self.gains)
-                .map(|(a, g)| a[ch] / g.max(1e-300))
+                .enumerate()
+                .map(|(f, (a, g))| (a[ch] - self.interreflection_of(f)[ch]) / g.max(1e-300))
                 .collect();
             if v.is_empty() {
                 return 0.0;
@@ -159,6 +170,33 @@ impl CalibratedModel {
         })
     }
 
+    /// `kappa_c L_f` of fitted frame `frame` (zeros without the inter-reflection term).
+    fn interreflection_of(&self, frame: usize) -> [f64; 3] {
+        match (&self.interreflection, &self.frame_light) {
+            (Some(k), Some(l)) => {
+                let light = l.get(frame).copied().unwrap_or(0.0);
+                k.map(|k| k * light)
+            }
+            _ => [0.0; 3],
+        }
+    }
+
+    /// The ambient term of a new view at the reference gain: [`Self::new_view_ambient`] plus
+    /// the light inter-reflected in this view, `kappa_c L`, where L is the view's mean
+    /// luminance over its surface pixels, inter-reflection included:
+    /// `L = L0 + (sum_c LUMA_c kappa_c) L`, with `light_without` = L0 the mean luminance of
+    /// the view's direct light plus [`Self::new_view_ambient`]. The light moves with the
+    /// camera, so a view close to the wall holds more light than one down a wide airway.
+    pub fn view_ambient(&self, light_without: f64) -> [f64; 3] {
+        let base = self.new_view_ambient();
+        let Some(k) = self.interreflection else {
+            return base;
+        };
+        let k_lum: f64 = (0..3).map(|c| LUMA[c] * k[c]).sum();
+        // kappa is a few percent; the bound only guards a degenerate fit.
+        let light = light_without.max(0.0) / (1.0 - k_lum).max(0.05);
+        std::array::from_fn(|c| base[c] + k[c] * light)
+    }
     /// The albedo (relative to the mean albedo folded into rho) that de-lights `value` (linear
     /// intensity) seen in fitted frame `frame`: `(value - a_f) / (g_f rho s / z^2)`.
     /// `None` for an unknown frame or a non-positive shading.
@@ -223,6 +261,20 @@ impl CalibratedModel {
                 ));
             }
         }
+        if let Some(l) = &self.frame_light {
+            if l.len() != self.gains.len() {
+                return Err(format!(
+                    "calibrated.frame_light has {} entries for {} gains",
+                    l.len(),
+                    self.gains.len()
+                ));
+            }
+        }
+        if self.interreflection.is_some() != self.frame_light.is_some() {
+            return Err(
+                "calibrated.interreflection and calibrated.frame_light go together".to_string(),
+            );
+        }
         Ok(())
     }
 }
@@ -260,6 +312,8 @@ mod tests {
             gains: vec![1.0, 2.0],
             reference_frame: 0,
             ambient: Some(vec![[0.0; 3], [0.01, 0.02, 0.03]]),
+            interreflection: None,
+            frame_light: None,
             rms_residual: [0.0; 3],
             samples_used: 0,
         };
@@ -278,5 +332,53 @@ mod tests {
         let json = serde_json::to_string(&m).unwrap();
         let back: CalibratedModel = serde_json::from_str(&json).unwrap();
         assert_eq!(back, m);
+    }
+
+    #[test]
+    fn a_new_view_reflects_its_own_light() {
+        // Two frames: kappa L_f plus a free term of 0.01 per unit gain in every channel.
+        let kappa = [0.05, 0.04, 0.03];
+        let light = [0.2, 0.3];
+        let gains = vec![1.0, 2.0];
+        let ambient = (0..2)
+            .map(|f| std::array::from_fn(|c| kappa[c] * light[f] + 0.01 * gains[f]))
+            .collect();
+        let m = CalibratedModel {
+            rho: [vec![1.0; 4], vec![1.0; 4], vec![1.0; 4]],
+            s: vec![1.0, 1.0],
+            cos_theta_edge: 0.5,
+            gains,
+            reference_frame: 0,
+            ambient: Some(ambient),
+            interreflection: Some(kappa),
+            frame_light: Some(light.to_vec()),
+            rms_residual: [0.0; 3],
+            samples_used: 0,
+        };
+        m.validate().unwrap();
+        // The part that does not move with the light: the free term alone.
+        for a in m.new_view_ambient() {
+            assert!((a - 0.01).abs() < 1e-12, "{a}");
+        }
+        // A view whose direct light (plus that term) averages 0.4: its mean luminance L with
+        // the inter-reflection satisfies L = 0.4 + sum_c LUMA_c kappa_c L.
+        let a = m.view_ambient(0.4);
+        let l = 0.4 + (0..3).map(|c| LUMA[c] * (a[c] - 0.01)).sum::<f64>();
+        for c in 0..3 {
+            assert!((a[c] - (0.01 + kappa[c] * l)).abs() < 1e-12, "channel {c}");
+        }
+        // Twice the light, twice the inter-reflection.
+        let b = m.view_ambient(0.8);
+        assert!(((b[1] - 0.01) / (a[1] - 0.01) - 2.0).abs() < 1e-12);
+        // Without the term a view gets the median of a_f / g_f, as before.
+        let plain = CalibratedModel {
+            interreflection: None,
+            frame_light: None,
+            ..m.clone()
+        };
+        assert_eq!(plain.view_ambient(0.4), plain.new_view_ambient());
+        let mut bad = m.clone();
+        bad.frame_light = None;
+        assert!(bad.validate().is_err());
     }
 }

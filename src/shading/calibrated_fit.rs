@@ -351,6 +351,10 @@ fn model_of(
                 })
                 .collect()
         }),
+        interreflection: lay
+            .interreflection
+            .then(|| std::array::from_fn(|c| p[lay.k_off() + c])),
+        frame_light: lay.interreflection.then(|| frame_light.to_vec()),
         rms_residual: rms,
         samples_used: n,
     }

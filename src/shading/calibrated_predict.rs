@@ -128,6 +128,8 @@ mod tests {
             gains: vec![1.0],
             reference_frame: 0,
             ambient: None,
+            interreflection: None,
+            frame_light: None,
             rms_residual: [0.0; 3],
             samples_used: 0,
         };

@@ -125,6 +125,8 @@ mod tests {
             gains: vec![1.0, 2.0],
             reference_frame: 0,
             ambient: Some(vec![[0.0; 3], [0.1, 0.2, 0.3]]),
+            interreflection: None,
+            frame_light: None,
             rms_residual: [0.0; 3],
             samples_used: 0,
         };
