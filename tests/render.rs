@@ -17,7 +17,7 @@ use bronchosim::render::{
     triangle_uvs, MaskedImage, MipOptions, MipTexture, RenderInputs, RenderOptions, ShadingMode,
     TrainingView, ViewpointIndex,
 };
-use bronchosim::shading::{ExclusionCounts, PsiModel};
+use bronchosim::shading::{CalibratedModel, ExclusionCounts, PsiModel};
 use bronchosim::texture::atlas::{build_atlas, rasterize_texels, AtlasOptions};
 
 /// Bend radius of the tube's centreline (mm) and tube radius (mm).
@@ -471,4 +471,94 @@ fn views_json_outside_the_output_folder_is_refused() {
     let v = read_views(&views, &out).unwrap();
     assert_eq!(v[0].name, "sub/v0.png");
     assert_eq!(v[0].path, out.join("sub/v0.png"));
+}
+
+#[test]
+fn calibrated_new_views_reflect_their_own_light() {
+    let fx = fixture(smooth_albedo);
+    let psi = vec![psi_at(&pose_at(0.1, 0.0), 1.0)];
+    let index = ViewpointIndex::new(&psi);
+    // A light with a cone and 6% / 5% / 4% inter-reflection per unit of the view's light.
+    let kappa = [0.06, 0.05, 0.04];
+    let light = CalibratedModel {
+        rho: [
+            vec![0.0, 40.0, 80.0, 120.0],
+            vec![0.0, 20.0, 40.0, 60.0],
+            vec![0.0, 15.0, 30.0, 45.0],
+        ],
+        s: vec![1.0, 0.7],
+        cos_theta_edge: 0.5,
+        gains: vec![1.0],
+        reference_frame: 0,
+        ambient: Some(vec![[0.0; 3]]),
+        interreflection: Some(kappa),
+        frame_light: Some(vec![0.0]),
+        rms_residual: [0.0; 3],
+        samples_used: 0,
+    };
+    let inputs = RenderInputs {
+        scene: &fx.scene,
+        tri_uv: &fx.tri_uv,
+        texture: &fx.plain,
+        psi: &psi,
+        index: &index,
+        calibrated: Some(&light),
+    };
+    let cam = camera(96, 60.0);
+    let opts = RenderOptions {
+        mipmap: false,
+        ..Default::default()
+    };
+    let mut reflected = Vec::new();
+    for pose in [pose_at(0.3, 0.0), pose_at(0.3, 4.5)] {
+        let (img, mask) = render_view(&inputs, &cam, &pose, &opts).unwrap();
+        // Brute force: direct light at every hit, then the view's mean luminance with the
+        // inter-reflection found by fixed-point iteration (independent of the closed form).
+        let g = cast_frame(&fx.scene, &cam, &pose);
+        let hits: Vec<usize> = (0..g.tri.len()).filter(|&i| g.hit(i)).collect();
+        let cos_t: Vec<f64> = (0..g.tri.len())
+            .map(|i| {
+                let (x, y) = ((i % 96) as f64, (i / 96) as f64);
+                cam.pixel_ray(x, y).z
+            })
+            .collect();
+        let direct: Vec<[f64; 3]> = hits
+            .iter()
+            .map(|&i| {
+                let a = smooth_albedo(g.point[i]);
+                let s = light.eval_rgb(g.gamma[i] as f64, cos_t[i], g.z[i] as f64, 1.0);
+                std::array::from_fn(|c| a[c] as f64 * s[c])
+            })
+            .collect();
+        let luma = [0.2126, 0.7152, 0.0722];
+        let mean_lum = |add: [f64; 3]| {
+            direct
+                .iter()
+                .map(|d| (0..3).map(|c| luma[c] * (d[c] + add[c])).sum::<f64>())
+                .sum::<f64>()
+                / direct.len() as f64
+        };
+        let mut l = 0.0;
+        for _ in 0..50 {
+            l = mean_lum(kappa.map(|k| k * l));
+        }
+        let mut truth = Frame::new(cam.width, cam.height);
+        for (&i, d) in hits.iter().zip(&direct) {
+            for c in 0..3 {
+                truth.rgb[3 * i + c] = (d[c] + kappa[c] * l) as f32;
+            }
+        }
+        let tmask: Vec<bool> = (0..g.tri.len()).map(|i| g.hit(i)).collect();
+        assert_eq!(mask, tmask);
+        let psnr = psnr_masked(&srgb(&img), &srgb(&truth), &mask).unwrap();
+        println!("calibrated view with its own inter-reflection (L = {l:.4}): {psnr:.2} dB vs brute force");
+        assert!(psnr > 50.0, "PSNR {psnr}");
+        reflected.push(kappa[1] * l);
+    }
+    // Nearer the wall the view holds more light, and so more inter-reflected light.
+    println!(
+        "inter-reflection (G): centreline {:.4}, near the wall {:.4}",
+        reflected[0], reflected[1]
+    );
+    assert!(reflected[1] > 1.3 * reflected[0], "{reflected:?}");
 }
