@@ -34,6 +34,7 @@ fn bench(c: &mut Criterion) {
             cos_theta: &fr.cos_theta,
             rgb: &fr.rgb,
             texel: None,
+            width: fr.size,
         })
         .collect();
     let popts = PoolOptions::default();

@@ -114,6 +114,11 @@ enum Command {
         /// observed light, 3 parameters for the whole video; on by default, see BENCHMARKS.md).
         #[arg(long)]
         no_interreflection: bool,
+        /// Rounds of refitting the calibrated light and its gains with each pixel's albedo
+        /// predicted from its colour, right after the uniform-albedo fit (0 keeps the uniform
+        /// albedo; see BENCHMARKS.md).
+        #[arg(long, default_value_t = 2)]
+        chroma_refits: usize,
         /// Rounds of refitting the calibrated light's shape with the fused texture's albedo
         /// (each followed by a gain correction; 0 keeps the uniform-albedo light).
         #[arg(long, default_value_t = 2)]
@@ -316,6 +321,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             ambient,
             no_interreflection,
             light_refits,
+            chroma_refits,
             truth,
             force,
         } => {
@@ -337,6 +343,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             opts.calibrated.ambient = ambient;
             opts.calibrated.interreflection = !no_interreflection;
             opts.refine_light = light_refits;
+            opts.chroma_refits = chroma_refits;
             opts.fusion.method = match fusion.as_str() {
                 "max" => bronchosim::texture::fusion::FusionMethod::MaxWeightSmoothed {
                     sigma_texels: 2.0,

@@ -64,8 +64,12 @@ fn phantom_then_build_writes_the_model_folder() {
         (Some(3), Some(3))
     );
     assert_eq!(
-        (lf["gain_corrections"].as_u64(), lf["light_refits"].as_u64()),
-        (Some(2), Some(2))
+        (
+            lf["chroma_refits"].as_u64(),
+            lf["gain_corrections"].as_u64(),
+            lf["light_refits"].as_u64()
+        ),
+        (Some(2), Some(2), Some(2))
     );
     assert_eq!(lf["reference_frame"], 4);
 

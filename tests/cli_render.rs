@@ -183,16 +183,18 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
     // demo phantom seeds 2 and 3 measure 10-11% without it; BENCHMARKS.md "Inter-reflection").
     assert!(cone_rms < 0.02, "cone RMS {cone_rms}");
     // Issue 8 aims at 2% per gain; measured here (24 frames, reference = the middle frame):
-    // worst 7.6%, RMS 2.65%; with the global scale fitted worst 6.9%, RMS 2.5% (7.5% / 3.2%
+    // worst 3.47%, RMS 1.85%; with the global scale fitted worst 3.19%, RMS 1.66% (session 4,
+    // before the albedo predicted from colour: 7.6% / 2.65% and 6.9% / 2.5%; 7.5% / 3.2%
     // before the light's refit with the fused albedo, 7.4% / 3.1% without the inter-reflection
     // term; before the Huber loss and the second correction: 9.8% / 4.1% and 7.5% / 3.5%).
-    // Under the uniform-albedo fit each frame's gain absorbs the mean albedo of the mucosa it
-    // sees (vessels, pale patches); the corrections against the fused texture
-    // (workflow::gain_refine) remove the frame-to-frame part, not the albedo's slow variation
-    // that neighbouring frames share. The bounds pin today's level so a regression shows.
-    assert!(rms_gain < 0.032, "gain RMS error {rms_gain}");
+    // The albedo predicted from each pixel's colour (shading::chroma_albedo) keeps the vessels
+    // and pale patches out of the gains; the corrections against the fused texture
+    // (workflow::gain_refine) remove most of the rest frame to frame. The bounds pin today's
+    // level so a regression shows.
+    assert!(worst_gain < 0.05, "worst gain error {worst_gain}");
+    assert!(rms_gain < 0.025, "gain RMS error {rms_gain}");
     assert!(
-        rms_scaled < 0.032,
+        rms_scaled < 0.025,
         "gain RMS error, global scale fitted: {rms_scaled}"
     );
 
@@ -332,11 +334,13 @@ fn demo_phantom_albedo_is_within_ten_percent() {
     // release and test builds alike).
     assert!(e.pixels > 700_000, "{} pixels compared", e.pixels);
     assert!(e.relative_rms < 0.10, "{}", e.relative_rms);
-    // Issue 8 aims at 2%; measured worst 4.28% (frame 0, the top of the trachea that no other
-    // frame sees), RMS 1.85% relative to the reference (the middle frame), 3.4% / 1.6% with the
-    // global scale fitted (6.5% / 2.14% before the light's refit with the fused albedo; 4.6% /
-    // 2.3% without the inter-reflection term). The bounds pin today's level: the RMS within
-    // 2%, not yet every frame.
+    // Issue 8 aims at 2%; measured worst 3.81% (frame 0, the top of the trachea that no other
+    // frame sees), RMS 1.65% relative to the reference (the middle frame), 3.36% / 1.58% with
+    // the global scale fitted (session 4, before the albedo predicted from colour: 4.28% /
+    // 1.85%; 6.5% / 2.14% before the light's refit with the fused albedo; 4.6% / 2.3% without
+    // the inter-reflection term). With the true albedo a per-frame estimate would still miss
+    // 2% on four frames (the floor, printed below; BENCHMARKS.md). The bounds pin today's
+    // level: the RMS within 2%, not every frame.
     let g = gain_errors(dir);
     println!(
         "demo-size phantom: gains worst {:.2}%, RMS {:.2}% relative to the reference; {:.2}% / \
@@ -347,7 +351,7 @@ fn demo_phantom_albedo_is_within_ten_percent() {
         100.0 * g.rms_scaled
     );
     assert!(
-        g.worst < 0.05 && g.rms < 0.02,
+        g.worst < 0.045 && g.rms < 0.0185,
         "{:.4} {:.4}",
         g.worst,
         g.rms

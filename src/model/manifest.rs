@@ -115,6 +115,10 @@ pub struct LightFitSettings {
     pub interreflection: bool,
     /// Frame whose gain is 1 (the exposure of new views).
     pub reference_frame: usize,
+    /// Refits of the light and its gains with the albedo predicted from each pixel's colour
+    /// (`--chroma-refits`), before the gain corrections.
+    #[serde(default)]
+    pub chroma_refits: usize,
     /// Gain corrections against the fused texture before the light's refits.
     pub gain_corrections: usize,
     /// Refits of the light's shape with the fused texture's albedo (`--light-refits`), each

@@ -27,6 +27,9 @@ pub struct FrameData<'a> {
     /// Optional texel (or surface patch) id per pixel for the albedo refinement; `u32::MAX`
     /// for none.
     pub texel: Option<&'a [u32]>,
+    /// Image width (pixels): the arrays are row-major images of this width (for each
+    /// sample's neighbours; 0 when unknown).
+    pub width: usize,
 }
 
 /// How pixels become pooled samples.
@@ -69,6 +72,10 @@ pub struct PooledSamples {
     pub rgb: [Vec<f32>; 3],
     /// Texel id per sample when the frames gave them (`u32::MAX`: none).
     pub texel: Option<Vec<u32>>,
+    /// Per sample, the mean log colour ratios (log G/R, log B/R) of its 8 neighbouring pixels
+    /// that obey the model (NaN: none, or the image width unknown): the sample's colour
+    /// measured without its own noise (`shading::chroma_albedo`).
+    pub neighbour_chroma: Vec<[f32; 2]>,
     /// `frame_start[f]..frame_start[f + 1]` are frame f's samples (length frames + 1).
     pub frame_start: Vec<usize>,
     /// Pixels excluded per frame, by reason (subsampling does not count as exclusion).
@@ -112,6 +119,8 @@ impl PooledSamples {
         self.z.extend_from_slice(&other.z);
         self.frame.extend(other.frame.iter().map(|f| f + base));
         self.pixel.extend_from_slice(&other.pixel);
+        self.neighbour_chroma
+            .extend_from_slice(&other.neighbour_chroma);
         for ch in 0..3 {
             self.rgb[ch].extend_from_slice(&other.rgb[ch]);
         }
@@ -229,6 +238,7 @@ pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSam
             out.z.push(fr.z[i]);
             out.frame.push(f as u32);
             out.pixel.push(i as u32);
+            out.neighbour_chroma.push(neighbour_chroma(fr, i, so));
             for ch in 0..3 {
                 out.rgb[ch].push(fr.rgb[3 * i + ch]);
             }
@@ -241,6 +251,46 @@ pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSam
         out.frame_light.push(light);
     }
     Ok(out)
+}
+
+/// The mean (log G/R, log B/R) of the 8 neighbours of pixel `i` that hit the surface with
+/// every channel between the noise floor and saturation; NaN when none does.
+fn neighbour_chroma(fr: &FrameData, i: usize, so: &SampleOptions) -> [f32; 2] {
+    let w = fr.width;
+    let n = fr.z.len();
+    if w == 0 || n % w != 0 {
+        return [f32::NAN; 2];
+    }
+    let (x, y) = ((i % w) as isize, (i / w) as isize);
+    let h = (n / w) as isize;
+    let (mut sum, mut count) = ([0.0f64; 2], 0u32);
+    for dy in -1..=1isize {
+        for dx in -1..=1isize {
+            let (xx, yy) = (x + dx, y + dy);
+            if (dx, dy) == (0, 0) || xx < 0 || yy < 0 || xx >= w as isize || yy >= h {
+                continue;
+            }
+            let j = (yy * w as isize + xx) as usize;
+            let px = &fr.rgb[3 * j..3 * j + 3];
+            let zj = fr.z[j];
+            if !(zj.is_finite() && zj > 0.0)
+                || px
+                    .iter()
+                    .any(|&v| !(v > so.noise_floor && v < so.saturation_level))
+            {
+                continue;
+            }
+            let l: [f64; 3] = std::array::from_fn(|c| f64::from(px[c]).ln());
+            sum[0] += l[1] - l[0];
+            sum[1] += l[2] - l[0];
+            count += 1;
+        }
+    }
+    if count == 0 {
+        [f32::NAN; 2]
+    } else {
+        sum.map(|s| (s / f64::from(count)) as f32)
+    }
 }
 
 /// Inverse-density weights over (gamma, z, theta): a 3-D histogram with
@@ -327,6 +377,7 @@ mod tests {
             cos_theta: &ct,
             rgb: &rgb,
             texel: None,
+            width: 0,
         };
         let opts = PoolOptions {
             max_per_frame: 350,
@@ -367,6 +418,7 @@ mod tests {
             cos_theta: &ct,
             rgb: &rgb,
             texel: None,
+            width: 0,
         };
         let opts = PoolOptions::default();
         let together = pool_frames(&[fr, fr, fr], &opts).unwrap();
@@ -400,5 +452,39 @@ mod tests {
         let mean = w.iter().map(|&x| f64::from(x)).sum::<f64>() / 1000.0;
         assert!((mean - 1.0).abs() < 1e-5);
         assert!(w[0] * 20.0 < w[950], "{} {}", w[0], w[950]);
+    }
+
+    #[test]
+    fn neighbour_chroma_averages_the_neighbours_that_obey_the_model() {
+        // 3x3 image: centre (0.5, 0.25, 0.1); neighbours (0.4, 0.1, 0.2) except one saturated
+        // and one without a hit.
+        let mut rgb = Vec::new();
+        for k in 0..9 {
+            rgb.extend_from_slice(match k {
+                4 => &[0.5f32, 0.25, 0.1],
+                0 => &[1.0, 0.5, 0.5],
+                _ => &[0.4, 0.1, 0.2],
+            });
+        }
+        let mut z = vec![10.0f32; 9];
+        z[8] = f32::INFINITY;
+        let g = vec![0.8f32; 9];
+        let fr = FrameData {
+            gamma: &g,
+            z: &z,
+            cos_theta: &g,
+            rgb: &rgb,
+            texel: None,
+            width: 3,
+        };
+        let so = SampleOptions::default();
+        let c = neighbour_chroma(&fr, 4, &so);
+        assert!((c[0] - (0.25f32).ln()).abs() < 1e-6 && (c[1] - (0.5f32).ln()).abs() < 1e-6);
+        // A corner pixel has three neighbours, the centre among them.
+        let c = neighbour_chroma(&fr, 2, &so);
+        let want = ((0.25f64).ln() * 2.0 + (0.5f64).ln()) / 3.0;
+        assert!((f64::from(c[0]) - want).abs() < 1e-6, "{c:?}");
+        // Unknown layout: no colour.
+        assert!(neighbour_chroma(&FrameData { width: 0, ..fr }, 4, &so)[0].is_nan());
     }
 }

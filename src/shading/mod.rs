@@ -17,6 +17,7 @@ mod calibrated_moments;
 pub mod calibrated_plots;
 pub mod calibrated_predict;
 pub mod calibrated_samples;
+pub mod chroma_albedo;
 pub mod fit;
 pub mod frame_shading;
 mod moments;

@@ -22,6 +22,7 @@ use crate::shading::calibrated_predict::cos_theta_of;
 use crate::shading::calibrated_samples::{
     density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples,
 };
+use crate::shading::chroma_albedo::refit_with_chroma_albedo;
 use crate::shading::fit::Robust;
 use crate::shading::fit::{fit_psi, FitOptions};
 use crate::shading::psi::PsiModel;
@@ -82,6 +83,10 @@ pub struct BuildOptions {
     /// Most samples pooled over the whole video (fewer per frame for long videos; at least
     /// 1000 per frame).
     pub max_pooled_samples: usize,
+    /// Rounds, right after the uniform-albedo fit, of refitting the calibrated light and its
+    /// gains with each pixel's albedo predicted from its colour
+    /// (`shading::chroma_albedo`; 0 keeps the uniform albedo).
+    pub chroma_refits: usize,
     /// Rounds of correcting the calibrated light's gains against a texture fused with them.
     pub refine_gains: usize,
     /// Rounds, after those, of refitting the calibrated light's shape (rho, s, kappa) with each
@@ -132,6 +137,7 @@ impl Default for BuildOptions {
             calibrated_reference: None,
             pool: PoolOptions::default(),
             max_pooled_samples: 4_000_000,
+            chroma_refits: 2,
             refine_gains: 2,
             refine_light: 2,
             cross_validate_every: 5,
@@ -277,6 +283,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
                 cos_theta: &cos_theta,
                 rgb: &frame.rgb,
                 texel: None,
+                width: frame.width as usize,
             };
             let part = pool_frames(&[data], &pool)?;
             if opts.refine_light > 0 {
@@ -328,6 +335,11 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         }
     };
     if let Some(model) = calibrated.as_mut() {
+        // The albedo predicted from each pixel's colour instead of a uniform one (see
+        // chroma_albedo)...
+        for _ in 0..opts.chroma_refits {
+            refit_with_chroma_albedo(model, &pooled, &density, &cal_opts)?;
+        }
         let refine = LightRefinement {
             case: &case,
             scene: &scene,
@@ -344,7 +356,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
             },
             quiet: opts.quiet,
         };
-        // Corrections of the gains against a texture fused with them (see gain_refine)...
+        // ...corrections of the gains against a texture fused with them (see gain_refine)...
         for _ in 0..opts.refine_gains {
             refine.correct_gains(model)?;
         }
@@ -379,6 +391,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         reference_frame: m.reference_frame,
         gain_corrections: opts.refine_gains,
         light_refits: opts.refine_light,
+        chroma_refits: opts.chroma_refits,
     });
     timings.calibrated_fit = t.elapsed().as_secs_f64();
 
