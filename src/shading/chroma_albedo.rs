@@ -42,6 +42,14 @@ const IRLS_ROUNDS: usize = 5;
 /// millions; measured on the demo: the same gains to 0.01%).
 const REGRESSION_STRIDE: usize = 4;
 
+/// One row of the regression: a sample's monomials (without the constant), its log residuals
+/// per channel and its density weight.
+struct Row {
+    feat: Vector5<f64>,
+    r: [f64; 3],
+    weight: f64,
+}
+
 /// The fitted relation between chromaticity and log albedo.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ChromaAlbedo {
@@ -52,10 +60,10 @@ pub struct ChromaAlbedo {
 }
 
 /// Per sample: the log residuals `log(I_c / pred_c)` under a light and the chromaticity x
-/// (NaN where undefined).
+/// (NaN where undefined). f32: they live beside the pool's millions of samples.
 struct Residuals {
-    r: Vec<[f64; 3]>,
-    x: Vec<[f64; 2]>,
+    r: Vec<[f32; 3]>,
+    x: Vec<[f32; 2]>,
 }
 
 /// [`Residuals`] of `s` under `model`. x is the neighbours' mean log colour ratios
@@ -63,7 +71,7 @@ struct Residuals {
 /// out: a pixel's own noise would enter both sides of the regression (its red channel in
 /// `log(I_R / pred_R)` and, negated, in `log(I_G / I_R)`) and tilt the fitted relation.
 fn residuals(model: &CalibratedModel, s: &PooledSamples) -> Residuals {
-    let per: Vec<([f64; 3], [f64; 2])> = (0..s.frames())
+    let (r, x) = (0..s.frames())
         .into_par_iter()
         .flat_map_iter(|f| {
             (s.frame_start[f]..s.frame_start[f + 1]).map(move |i| {
@@ -77,21 +85,20 @@ fn residuals(model: &CalibratedModel, s: &PooledSamples) -> Residuals {
                 let r = std::array::from_fn(|c| {
                     let v = f64::from(s.rgb[c][i]);
                     if pred[c] > 0.0 && v > 0.0 {
-                        (v / pred[c]).ln()
+                        (v / pred[c]).ln() as f32
                     } else {
-                        f64::NAN
+                        f32::NAN
                     }
                 });
                 let nc = s.neighbour_chroma.get(i).copied().unwrap_or([f32::NAN; 2]);
                 let x = [
-                    f64::from(nc[0]) - (pred[1] / pred[0]).ln(),
-                    f64::from(nc[1]) - (pred[2] / pred[0]).ln(),
+                    (f64::from(nc[0]) - (pred[1] / pred[0]).ln()) as f32,
+                    (f64::from(nc[1]) - (pred[2] / pred[0]).ln()) as f32,
                 ];
                 (r, x)
             })
         })
-        .collect();
-    let (r, x) = per.into_iter().unzip();
+        .unzip();
     Residuals { r, x }
 }
 
@@ -114,10 +121,14 @@ impl ChromaAlbedo {
 
     /// The fit on each sample's log residuals `r` (every [`REGRESSION_STRIDE`]-th sample).
     fn fit_residuals(res: &Residuals, density: &[f32], frame_start: &[usize]) -> Result<Self> {
-        let (r, x) = (&res.r, &res.x);
         let mut range = [[0.0; 2]; 2];
         for (k, rg) in range.iter_mut().enumerate() {
-            let mut v: Vec<f64> = x.iter().map(|a| a[k]).filter(|v| v.is_finite()).collect();
+            let mut v: Vec<f32> = res
+                .x
+                .iter()
+                .map(|a| a[k])
+                .filter(|v| v.is_finite())
+                .collect();
             if v.len() < 100 {
                 return Err(Error::Other(format!(
                     "chroma albedo: {} samples with a colour",
@@ -125,45 +136,50 @@ impl ChromaAlbedo {
                 )));
             }
             let n = v.len();
-            let lo = *v.select_nth_unstable_by(n / 100, f64::total_cmp).1;
-            let hi = *v.select_nth_unstable_by(n - 1 - n / 100, f64::total_cmp).1;
-            *rg = [lo, hi];
+            let lo = *v.select_nth_unstable_by(n / 100, f32::total_cmp).1;
+            let hi = *v.select_nth_unstable_by(n - 1 - n / 100, f32::total_cmp).1;
+            *rg = [f64::from(lo), f64::from(hi)];
         }
         let mut out = ChromaAlbedo {
             coeffs: [[0.0; 6]; 3],
             range,
         };
-        // The monomials without the constant: within a frame only differences count.
-        let feats: Vec<Vector5<f64>> = x
-            .iter()
-            .map(|&a| phi(out.clamp(a)).fixed_rows::<5>(1).into_owned())
-            .collect();
-        let usable: Vec<bool> = r
-            .iter()
-            .zip(density)
-            .enumerate()
-            .map(|(i, (l, &d))| {
-                i % REGRESSION_STRIDE == 0
-                    && l.iter().chain(&x[i]).all(|v| v.is_finite())
-                    && d > 0.0
-            })
-            .collect();
-        let frames: Vec<std::ops::Range<usize>> =
-            frame_start.windows(2).map(|w| w[0]..w[1]).collect();
+        // The regression's rows, frame by frame: every REGRESSION_STRIDE-th sample with a
+        // colour, its monomials without the constant (within a frame only differences count).
+        let mut rows: Vec<Row> = Vec::new();
+        let mut row_start = vec![0usize];
+        for fr in frame_start.windows(2) {
+            for i in (fr[0]..fr[1]).filter(|i| i % REGRESSION_STRIDE == 0) {
+                let (r, x) = (res.r[i], res.x[i]);
+                if density[i] > 0.0 && r.iter().chain(&x).all(|v| v.is_finite()) {
+                    let x = out.clamp(x.map(f64::from));
+                    let feat = phi(x).fixed_rows::<5>(1).into_owned();
+                    rows.push(Row {
+                        feat,
+                        r: r.map(f64::from),
+                        weight: f64::from(density[i]),
+                    });
+                }
+            }
+            row_start.push(rows.len());
+        }
+        let frames: Vec<&[Row]> = row_start.windows(2).map(|w| &rows[w[0]..w[1]]).collect();
         for c in 0..3 {
-            let mut robust = vec![1.0f64; r.len()];
+            let mut robust = vec![1.0f64; rows.len()];
             let mut b = Vector5::zeros();
             for _ in 0..IRLS_ROUNDS {
+                let rw: Vec<&[f64]> = row_start.windows(2).map(|w| &robust[w[0]..w[1]]).collect();
                 // Each frame's weighted means: its gain (and any error of it) drops out.
                 let means: Vec<(Vector5<f64>, f64)> = frames
                     .par_iter()
-                    .map(|fr| {
+                    .zip(&rw)
+                    .map(|(rows, rw)| {
                         let (mut sw, mut sp, mut sr) = (0.0, Vector5::zeros(), 0.0);
-                        for i in fr.clone().filter(|&i| usable[i]) {
-                            let w = f64::from(density[i]) * robust[i];
+                        for (row, q) in rows.iter().zip(rw.iter()) {
+                            let w = row.weight * q;
                             sw += w;
-                            sp += feats[i] * w;
-                            sr += w * r[i][c];
+                            sp += row.feat * w;
+                            sr += w * row.r[c];
                         }
                         if sw > 0.0 {
                             (sp / sw, sr / sw)
@@ -174,14 +190,15 @@ impl ChromaAlbedo {
                     .collect();
                 let (ata, atb) = frames
                     .par_iter()
+                    .zip(&rw)
                     .zip(&means)
-                    .map(|(fr, (mp, mr))| {
+                    .map(|((rows, rw), (mp, mr))| {
                         let (mut a, mut v) = (Matrix5::<f64>::zeros(), Vector5::<f64>::zeros());
-                        for i in fr.clone().filter(|&i| usable[i]) {
-                            let w = f64::from(density[i]) * robust[i];
-                            let p = feats[i] - mp;
+                        for (row, q) in rows.iter().zip(rw.iter()) {
+                            let w = row.weight * q;
+                            let p = row.feat - mp;
                             a += p * p.transpose() * w;
-                            v += p * (w * (r[i][c] - mr));
+                            v += p * (w * (row.r[c] - mr));
                         }
                         (a, v)
                     })
@@ -193,25 +210,19 @@ impl ChromaAlbedo {
                     .cholesky()
                     .map(|ch| ch.solve(&atb))
                     .ok_or_else(|| Error::Other("chroma albedo: singular regression".into()))?;
-                // Robust scale: the median absolute residual.
-                let (usable, feats) = (&usable, &feats);
-                let res: Vec<f64> = frames
-                    .par_iter()
+                // Huber weights at the robust scale (the median absolute residual).
+                let abs_res: Vec<f64> = frames
+                    .iter()
                     .zip(&means)
-                    .flat_map_iter(|(fr, (mp, mr))| {
-                        fr.clone().map(move |i| {
-                            if usable[i] {
-                                (r[i][c] - mr - (feats[i] - mp).dot(&b)).abs()
-                            } else {
-                                f64::NAN
-                            }
-                        })
+                    .flat_map(|(rows, (mp, mr))| {
+                        rows.iter()
+                            .map(move |row| (row.r[c] - mr - (row.feat - mp).dot(&b)).abs())
                     })
                     .collect();
-                let mut finite: Vec<f64> = res.iter().copied().filter(|v| v.is_finite()).collect();
-                let mid = finite.len() / 2;
-                let sigma = 1.4826 * *finite.select_nth_unstable_by(mid, f64::total_cmp).1;
-                for (w, e) in robust.iter_mut().zip(&res) {
+                let mut sorted = abs_res.clone();
+                let mid = sorted.len() / 2;
+                let sigma = 1.4826 * *sorted.select_nth_unstable_by(mid, f64::total_cmp).1;
+                for (w, e) in robust.iter_mut().zip(&abs_res) {
                     let u = e / (HUBER * sigma.max(1e-12));
                     *w = if u > 1.0 { 1.0 / u } else { 1.0 };
                 }
@@ -239,7 +250,11 @@ impl ChromaAlbedo {
 
     fn albedo_of(&self, res: &Residuals) -> [Vec<f32>; 3] {
         std::array::from_fn(|c| {
-            let mut a: Vec<f64> = res.x.iter().map(|&x| self.log_albedo(c, x).exp()).collect();
+            let mut a: Vec<f64> = res
+                .x
+                .iter()
+                .map(|&x| self.log_albedo(c, x.map(f64::from)).exp())
+                .collect();
             let (sum, n) = a
                 .iter()
                 .filter(|v| v.is_finite())
