@@ -21,30 +21,37 @@ const FRAMES: usize = 48;
 
 type Video = (Vec<View>, Vec<Frame>);
 
-fn render_video(slow_albedo: f64) -> Video {
+/// The test video (FRAMES views along the tube) rendered with `opts`; frame f's noise seed is
+/// `seed + f`.
+fn render_video(opts: &RenderOptions, seed: u64) -> Video {
     let views = sequence(FRAMES, 11);
+    let frames = views
+        .iter()
+        .enumerate()
+        .map(|(f, v)| render(v, opts, seed + f as u64))
+        .collect();
+    (views, frames)
+}
+
+/// The test video with an albedo whose slow variation has amplitude `slow_albedo`.
+fn video_with_slow_albedo(slow_albedo: f64) -> Video {
     let opts = RenderOptions {
         slow_albedo,
         ..Default::default()
     };
-    let frames = views
-        .iter()
-        .enumerate()
-        .map(|(f, v)| render(v, &opts, 1000 + f as u64))
-        .collect();
-    (views, frames)
+    render_video(&opts, 1000)
 }
 
 /// The video with vessels and colour but no slow albedo drift along the airway.
 fn video() -> &'static Video {
     static V: OnceLock<Video> = OnceLock::new();
-    V.get_or_init(|| render_video(0.0))
+    V.get_or_init(|| video_with_slow_albedo(0.0))
 }
 
 /// The same video with an 8% slow albedo variation (period about 30 mm along the airway).
 fn video_slow_albedo() -> &'static Video {
     static V: OnceLock<Video> = OnceLock::new();
-    V.get_or_init(|| render_video(0.08))
+    V.get_or_init(|| video_with_slow_albedo(0.08))
 }
 
 fn frame_data(fr: &Frame) -> FrameData<'_> {
@@ -240,17 +247,12 @@ fn interreflection_term_keeps_far_light_out_of_the_gains() {
     // phantom's form, here 12% of it): it does not fall off as 1/z^2, so a light without the
     // term sees far surfaces too bright and each gain absorbs its frame's share of them. The
     // fit models it as kappa times the frame's mean observed luminance.
-    let views = sequence(FRAMES, 11);
     let opts = RenderOptions {
         slow_albedo: 0.0,
         interreflection: 0.12,
         ..Default::default()
     };
-    let frames: Vec<Frame> = views
-        .iter()
-        .enumerate()
-        .map(|(f, v)| render(v, &opts, 1000 + f as u64))
-        .collect();
+    let (views, frames) = render_video(&opts, 1000);
     let all: Vec<&Frame> = frames.iter().collect();
     let vs: Vec<&View> = views.iter().collect();
     let (s, w) = pooled(&all);
@@ -295,17 +297,12 @@ fn colour_predicted_albedo_keeps_blood_out_of_the_gains() {
     // green): with a uniform albedo each gain absorbs the blood of what its frame sees. The
     // albedo predicted from each pixel's colour (shading::chroma_albedo) tells the darker,
     // redder mucosa from a lower gain.
-    let views = sequence(FRAMES, 11);
     let opts = RenderOptions {
         slow_albedo: 0.0,
         slow_blood: 0.1,
         ..Default::default()
     };
-    let frames: Vec<Frame> = views
-        .iter()
-        .enumerate()
-        .map(|(f, v)| render(v, &opts, 3000 + f as u64))
-        .collect();
+    let (views, frames) = render_video(&opts, 3000);
     let all: Vec<&Frame> = frames.iter().collect();
     let vs: Vec<&View> = views.iter().collect();
     let (s, w) = pooled(&all);

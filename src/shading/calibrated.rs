@@ -252,20 +252,13 @@ impl CalibratedModel {
                 self.gains.len()
             ));
         }
-        if let Some(a) = &self.ambient {
-            if a.len() != self.gains.len() {
+        for (name, len) in [
+            ("ambient", self.ambient.as_ref().map(Vec::len)),
+            ("frame_light", self.frame_light.as_ref().map(Vec::len)),
+        ] {
+            if let Some(len) = len.filter(|&l| l != self.gains.len()) {
                 return Err(format!(
-                    "calibrated.ambient has {} entries for {} gains",
-                    a.len(),
-                    self.gains.len()
-                ));
-            }
-        }
-        if let Some(l) = &self.frame_light {
-            if l.len() != self.gains.len() {
-                return Err(format!(
-                    "calibrated.frame_light has {} entries for {} gains",
-                    l.len(),
+                    "calibrated.{name} has {len} entries for {} gains",
                     self.gains.len()
                 ));
             }
