@@ -422,18 +422,24 @@ fn outputs_are_written_and_uvs_address_the_albedo() {
     assert!(glb.windows(png.len().min(64)).any(|x| x == &png[..64]));
 }
 
-/// Diagnostic (run with --ignored): error and coverage against `min_relative_weight`.
+/// The default `min_relative_weight` (0.05): texels lit at under 5% of the frame's brightest
+/// prediction are where the shading is least reliable, and dropping them cuts the albedo error
+/// several-fold while keeping more coverage than a stricter threshold. Measured (relative RMS
+/// error / covered texels, max-weight and average fusion): 0 -> 0.620 / 0.578 over 151,689;
+/// 0.02 -> 0.266 / 0.236 over 118,995; 0.05 -> 0.180 / 0.131 over 90,005; 0.1 -> 0.180 / 0.131
+/// over 81,296; 0.2 -> 0.180 / 0.139 over 73,924.
 #[test]
-#[ignore]
-fn diag_thresholds() {
+fn default_light_threshold_drops_unreliable_texels_and_keeps_coverage() {
     let (w, shots) = world();
-    for thr in [0.0, 0.02, 0.05, 0.1, 0.2] {
-        for method in [
-            FusionMethod::MaxWeightSmoothed { sigma_texels: 2.0 },
-            FusionMethod::WeightedAverage {
-                weight_exponent: 1.0,
-            },
-        ] {
+    let default = FusionOptions::default().delight.min_relative_weight;
+    assert_eq!(default, 0.05);
+    for method in [
+        FusionMethod::MaxWeightSmoothed { sigma_texels: 2.0 },
+        FusionMethod::WeightedAverage {
+            weight_exponent: 1.0,
+        },
+    ] {
+        let run = |thr: f64| {
             let mut obs: Vec<Observation> =
                 shots.iter().map(|s| s.observation(&w.camera)).collect();
             let mut opts = FusionOptions {
@@ -444,13 +450,17 @@ fn diag_thresholds() {
             let f = fuse(&w.texels, obs.as_mut_slice(), &opts).unwrap();
             let p = pairs(&f, &w.texels);
             let sc = scales(&p);
-            let edges = edge_slots(&w.texels);
-            eprintln!(
-                "thr {thr} {method:?}: covered {} err {:.4} edge {:.4} scale {sc:?}",
-                f.stats.covered_texels,
-                rel_rms(&p, sc, |_| true),
-                rel_rms(&p, sc, |s| edges[s])
-            );
-        }
+            (rel_rms(&p, sc, |_| true), f.stats.covered_texels)
+        };
+        let (none, chosen, strict) = (run(0.0), run(default), run(0.2));
+        println!(
+            "{method:?}: error / coverage without {none:?}, default {chosen:?}, 0.2 {strict:?}"
+        );
+        assert!(chosen.0 < 0.4 * none.0, "{chosen:?} vs {none:?}");
+        assert!(chosen.0 < strict.0 + 0.01, "{chosen:?} vs {strict:?}");
+        assert!(
+            chosen.1 as f64 > 1.15 * strict.1 as f64,
+            "{chosen:?} vs {strict:?}"
+        );
     }
 }
