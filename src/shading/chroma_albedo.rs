@@ -53,7 +53,8 @@ struct Row {
 /// The fitted relation between chromaticity and log albedo.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ChromaAlbedo {
-    /// Per channel R, G, B: coefficients of phi(x) = (1, x1, x2, x1², x2², x1·x2).
+    /// Per channel R, G, B: coefficients of phi(x) = (1, x1, x2, x1², x2², x1·x2); the
+    /// constant's is 0 (each frame has its own intercept, eliminated in the fit).
     pub coeffs: [[f64; 6]; 3],
     /// Clamp range of x1 and x2 (1st and 99th percentiles of the samples').
     pub range: [[f64; 2]; 2],
@@ -107,19 +108,8 @@ fn phi(x: [f64; 2]) -> Vector6<f64> {
 }
 
 impl ChromaAlbedo {
-    /// Fit the relation on `samples` (weights `density`) under the light `model`.
-    pub fn fit(model: &CalibratedModel, samples: &PooledSamples, density: &[f32]) -> Result<Self> {
-        if density.len() != samples.len() {
-            return Err(Error::Other(format!(
-                "chroma albedo: {} weights for {} samples",
-                density.len(),
-                samples.len()
-            )));
-        }
-        Self::fit_residuals(&residuals(model, samples), density, &samples.frame_start)
-    }
-
-    /// The fit on each sample's log residuals `r` (every [`REGRESSION_STRIDE`]-th sample).
+    /// The fit on the samples' residuals and chromaticities `res` (every
+    /// [`REGRESSION_STRIDE`]-th sample), with one intercept per frame (`frame_start`).
     fn fit_residuals(res: &Residuals, density: &[f32], frame_start: &[usize]) -> Result<Self> {
         let mut range = [[0.0; 2]; 2];
         for (k, rg) in range.iter_mut().enumerate() {
@@ -242,12 +232,7 @@ impl ChromaAlbedo {
         (1..6).map(|j| self.coeffs[c][j] * p[j]).sum()
     }
 
-    /// Each sample's albedo per channel under `model` (mean 1 per channel; NaN where a sample
-    /// has no colour).
-    pub fn sample_albedo(&self, model: &CalibratedModel, samples: &PooledSamples) -> [Vec<f32>; 3] {
-        self.albedo_of(&residuals(model, samples))
-    }
-
+    /// Each sample's albedo per channel (mean 1 per channel; NaN where a sample has no colour).
     fn albedo_of(&self, res: &Residuals) -> [Vec<f32>; 3] {
         std::array::from_fn(|c| {
             let mut a: Vec<f64> = res
