@@ -286,9 +286,9 @@ fn add_interreflection(model: &CalibratedModel, frame: &mut Frame, mask: &[bool]
         return;
     }
     let light_without = sum / hits as f64 / f64::from(gain);
-    let base = model.new_view_ambient();
-    let total = model.view_ambient(light_without);
-    let extra: [f32; 3] = std::array::from_fn(|c| ((total[c] - base[c]) * f64::from(gain)) as f32);
+    let extra = model
+        .view_interreflection(light_without)
+        .map(|a| (a * f64::from(gain)) as f32);
     for (px, _) in frame.rgb.chunks_exact_mut(3).zip(mask).filter(|(_, &m)| m) {
         for c in 0..3 {
             px[c] += extra[c];

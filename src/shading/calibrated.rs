@@ -73,7 +73,7 @@ pub struct CalibratedModel {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ambient: Option<Vec<[f64; 3]>>,
     /// kappa_c of the inter-reflection term `kappa_c · L_f` (unitless), when the fit had it.
-    /// A new view gets `kappa_c` times its own light (see [`Self::view_ambient`]).
+    /// A new view gets `kappa_c` times its own light (see [`Self::view_interreflection`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub interreflection: Option<[f64; 3]>,
     /// L_f per fitted frame: its mean observed luminance over its surface pixels (linear
@@ -181,21 +181,20 @@ impl CalibratedModel {
         }
     }
 
-    /// The ambient term of a new view at the reference gain: [`Self::new_view_ambient`] plus
-    /// the light inter-reflected in this view, `kappa_c L`, where L is the view's mean
-    /// luminance over its surface pixels, inter-reflection included:
-    /// `L = L0 + (sum_c LUMA_c kappa_c) L`, with `light_without` = L0 the mean luminance of
-    /// the view's direct light plus [`Self::new_view_ambient`]. The light moves with the
-    /// camera, so a view close to the wall holds more light than one down a wide airway.
-    pub fn view_ambient(&self, light_without: f64) -> [f64; 3] {
-        let base = self.new_view_ambient();
+    /// The light inter-reflected in a new view at the reference gain, `kappa_c L` (zeros
+    /// without the term), where L is the view's mean luminance over its surface pixels,
+    /// inter-reflection included: `L = L0 + (sum_c LUMA_c kappa_c) L`, with `light_without` =
+    /// L0 the mean luminance of the view's direct light plus [`Self::new_view_ambient`]. The
+    /// light moves with the camera, so a view close to the wall holds more light than one
+    /// down a wide airway.
+    pub fn view_interreflection(&self, light_without: f64) -> [f64; 3] {
         let Some(k) = self.interreflection else {
-            return base;
+            return [0.0; 3];
         };
         let k_lum: f64 = (0..3).map(|c| LUMA[c] * k[c]).sum();
         // kappa is a few percent; the bound only guards a degenerate fit.
         let light = light_without.max(0.0) / (1.0 - k_lum).max(0.05);
-        std::array::from_fn(|c| base[c] + k[c] * light)
+        k.map(|k| k * light)
     }
     /// The albedo (relative to the mean albedo folded into rho) that de-lights `value` (linear
     /// intensity) seen in fitted frame `frame`: `(value - a_f) / (g_f rho s / z^2)`.
@@ -355,21 +354,21 @@ mod tests {
         }
         // A view whose direct light (plus that term) averages 0.4: its mean luminance L with
         // the inter-reflection satisfies L = 0.4 + sum_c LUMA_c kappa_c L.
-        let a = m.view_ambient(0.4);
-        let l = 0.4 + (0..3).map(|c| LUMA[c] * (a[c] - 0.01)).sum::<f64>();
+        let a = m.view_interreflection(0.4);
+        let l = 0.4 + (0..3).map(|c| LUMA[c] * a[c]).sum::<f64>();
         for c in 0..3 {
-            assert!((a[c] - (0.01 + kappa[c] * l)).abs() < 1e-12, "channel {c}");
+            assert!((a[c] - kappa[c] * l).abs() < 1e-12, "channel {c}");
         }
         // Twice the light, twice the inter-reflection.
-        let b = m.view_ambient(0.8);
-        assert!(((b[1] - 0.01) / (a[1] - 0.01) - 2.0).abs() < 1e-12);
-        // Without the term a view gets the median of a_f / g_f, as before.
+        let b = m.view_interreflection(0.8);
+        assert!((b[1] / a[1] - 2.0).abs() < 1e-12);
+        // Without the term nothing moves with the view's light.
         let plain = CalibratedModel {
             interreflection: None,
             frame_light: None,
             ..m.clone()
         };
-        assert_eq!(plain.view_ambient(0.4), plain.new_view_ambient());
+        assert_eq!(plain.view_interreflection(0.4), [0.0; 3]);
         let mut bad = m.clone();
         bad.frame_light = None;
         assert!(bad.validate().is_err());
