@@ -7,9 +7,9 @@ use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use bronchosim::io::frames::{
-    linear_to_srgb16, linear_to_srgb8, read_png, write_png_srgb16, write_png_srgb8, Frame,
-};
+use bronchosim::image::srgb::{linear_to_srgb16, linear_to_srgb8};
+use bronchosim::image::Frame;
+use bronchosim::io::png::{read_png, write_png_srgb16, write_png_srgb8};
 use bronchosim::io::video::VideoReader;
 use criterion::{criterion_group, criterion_main, Criterion};
 

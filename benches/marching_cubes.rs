@@ -32,7 +32,7 @@ fn volume() -> Volume<f32> {
         ),
     ];
     let mut v = Volume::filled(dims, a, 0f32);
-    let mut seed = 99u64;
+    let mut rng = bronchosim::rng::SplitMix64::new(99);
     for k in 0..dims[2] {
         for j in 0..dims[1] {
             for i in 0..dims[0] {
@@ -43,10 +43,7 @@ fn volume() -> Volume<f32> {
                     let t = rel.dot(dir).clamp(0.0, 70.0);
                     d = d.min((rel - dir * t).norm() - r);
                 }
-                seed = seed
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                let noise = ((seed >> 40) as f64 / (1u64 << 24) as f64 - 0.5) * 60.0;
+                let noise = (rng.uniform() - 0.5) * 60.0;
                 v.set(i, j, k, (-480.0 + 520.0 * (d / 0.6).tanh() + noise) as f32);
             }
         }

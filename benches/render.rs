@@ -7,7 +7,7 @@
 mod meshes;
 
 use bronchosim::camera::Camera;
-use bronchosim::io::frames::Frame;
+use bronchosim::image::Frame;
 use bronchosim::math::Affine;
 use bronchosim::raycast::Scene;
 use bronchosim::render::{

@@ -13,13 +13,8 @@ use std::hint::black_box;
 fn frame() -> (Vec<f32>, Vec<f32>, Vec<f32>) {
     let n = 320 * 320;
     let (mut g, mut z, mut rgb) = (vec![0f32; n], vec![0f32; n], vec![0f32; 3 * n]);
-    let mut state = 12345u64;
-    let mut rnd = || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 40) as f32 / (1u64 << 24) as f32
-    };
+    let mut rng = bronchosim::rng::SplitMix64::new(12345);
+    let mut rnd = || rng.uniform_f32();
     for py in 0..320 {
         for px in 0..320 {
             let i = py * 320 + px;

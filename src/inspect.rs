@@ -127,17 +127,7 @@ pub fn inspect_case(dir: &Path, opts: &InspectOptions) -> Result<InspectReport> 
         min = min.min(v);
         max = max.max(v);
     }
-    let centres: Vec<Point3<f64>> = case
-        .poses
-        .iter()
-        .map(|p| {
-            Point3::new(
-                p.camera_to_world[(0, 3)],
-                p.camera_to_world[(1, 3)],
-                p.camera_to_world[(2, 3)],
-            )
-        })
-        .collect();
+    let centres: Vec<Point3<f64>> = case.poses.iter().map(|p| p.pose.centre()).collect();
     let path_length_mm = centres.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
     let mut in_air = 0;
     let mut outside = 0;

@@ -2,10 +2,11 @@
 //!
 //! The pipeline follows Chung et al., "Enhancement of Visual Realism with BRDF for Patient
 //! Specific Bronchoscopy Simulation" (MICCAI 2004). Stages meet at plain data types:
-//! [`volume::Volume`], [`camera::Camera`], [`io::poses::Pose`], [`io::frames::Frame`].
+//! [`volume::Volume`], [`camera::Camera`], [`camera::Pose`], [`image::Frame`].
 
 pub mod camera;
 pub mod error;
+pub mod image;
 pub mod inspect;
 pub mod io;
 pub mod math;
@@ -14,6 +15,7 @@ pub mod model;
 pub mod phantom;
 pub mod raycast;
 pub mod render;
+pub mod rng;
 pub mod shading;
 pub mod texture;
 pub mod volume;

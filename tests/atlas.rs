@@ -44,17 +44,6 @@ fn signed_area(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
 }
 
 /// A tiny deterministic generator (64-bit LCG), so failures reproduce.
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 #[test]
 fn airway_atlas_meets_quality_targets() {
     let (mesh, a, _) = airway();
@@ -152,14 +141,14 @@ fn bilinear_lookups_never_leave_their_chart() {
     let (_, a, geo) = airway();
     let map = geo.chart_map();
     let (w, h) = (a.width as i64, a.height as i64);
-    let mut rng = Lcg(7);
+    let mut rng = bronchosim::rng::SplitMix64::new(7);
     let mut checked = 0usize;
     for (t, tri) in a.mesh.triangles.iter().enumerate() {
         let chart = a.chart_of_triangle[t];
         let [p, q, r] = tri.map(|v| uv_texels(a, v));
         let mut samples = vec![p, q, r];
         for _ in 0..6 {
-            let (mut s, mut u) = (rng.next(), rng.next());
+            let (mut s, mut u) = (rng.uniform(), rng.uniform());
             if s + u > 1.0 {
                 (s, u) = (1.0 - s, 1.0 - u);
             }

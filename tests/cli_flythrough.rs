@@ -2,8 +2,9 @@
 //! cameras stay in the lumen, move evenly from the first training camera to the last, every
 //! frame looks down a lit tube, and path.json / flythrough.mp4 are what they claim to be.
 
-use bronchosim::io::frames::read_png;
-use bronchosim::io::poses::{camera_centre, read_poses};
+use bronchosim::camera::pose::camera_centre;
+use bronchosim::io::png::read_png;
+use bronchosim::io::poses::read_poses;
 use bronchosim::math::{Point3, Vector3};
 use bronchosim::model::Model;
 use bronchosim::render::{read_views, render_view, RenderOptions};
@@ -25,7 +26,7 @@ fn sphere(n: usize) -> Vec<[f32; 3]> {
 }
 
 /// Mean linear intensity of the sRGB PNG frames (all channels).
-fn mean(frame: &bronchosim::io::frames::Frame) -> f64 {
+fn mean(frame: &bronchosim::image::Frame) -> f64 {
     frame.rgb.iter().map(|&v| v as f64).sum::<f64>() / frame.rgb.len() as f64
 }
 
@@ -97,8 +98,8 @@ fn flythrough_stays_in_the_lumen_and_renders_a_lit_tube() {
     println!("steps {lo:.2}..{hi:.2} mm");
     assert!(lo > 0.5 && hi / lo < 1.5, "steps {steps:?}");
     let train = read_poses(&dir.join("case/poses.json"), &dir.join("case")).unwrap();
-    let t0 = train[0].centre();
-    let t1 = train[train.len() - 1].centre();
+    let t0 = train[0].pose.centre();
+    let t1 = train[train.len() - 1].pose.centre();
     let d0 = (centres[0] - t0).norm();
     let d1 = (centres[11] - t1).norm();
     assert!(

@@ -5,11 +5,11 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use bronchosim::image::srgb::{linear_to_srgb8, srgb_to_linear};
+use bronchosim::image::Frame;
 use bronchosim::io::frame_source::FrameSource;
-use bronchosim::io::frames::{
-    linear_to_srgb8, read_png, srgb_to_linear, write_png_srgb16, write_png_srgb8, Frame,
-};
 use bronchosim::io::paths::resolve_inside;
+use bronchosim::io::png::{read_png, write_png_srgb16, write_png_srgb8};
 use bronchosim::io::poses::{read_poses, write_poses, FrameRef, PoseEntry};
 use bronchosim::io::video::VideoReader;
 use bronchosim::math::{Affine, Matrix3, Vector3};
@@ -355,7 +355,7 @@ fn pose_with(frame: FrameRef, angle: f64, t: [f64; 3]) -> PoseEntry {
     m[(2, 3)] = t[2];
     PoseEntry {
         frame,
-        camera_to_world: m,
+        pose: bronchosim::camera::Pose::new(m),
     }
 }
 
@@ -458,16 +458,17 @@ fn pose_helpers_centre_direction_inverse() {
     );
     let p = PoseEntry {
         frame: FrameRef::VideoIndex(0),
-        camera_to_world: m,
+        pose: bronchosim::camera::Pose::new(m),
     };
-    assert_eq!(p.centre().coords, Vector3::new(10.0, 20.0, 30.0));
-    assert_eq!(p.viewing_direction(), Vector3::new(0.0, -1.0, 0.0));
-    let inv = p.world_to_camera();
+    assert_eq!(p.pose.centre().coords, Vector3::new(10.0, 20.0, 30.0));
+    assert_eq!(p.pose.viewing_direction(), Vector3::new(0.0, -1.0, 0.0));
+    let inv = p.pose.world_to_camera();
     assert!((inv * m - Affine::identity()).abs().max() < 1e-15);
     let general = pose_with(FrameRef::VideoIndex(0), 0.77, [3.0, -4.0, 5.0]);
-    let err = (general.world_to_camera() - general.camera_to_world.try_inverse().unwrap())
-        .abs()
-        .max();
+    let err = (general.pose.world_to_camera()
+        - general.pose.camera_to_world.try_inverse().unwrap())
+    .abs()
+    .max();
     assert!(err < 1e-14, "{err}");
     let _ = Matrix3::<f64>::identity();
 }

@@ -11,21 +11,7 @@ use bronchosim::mesh::TriMesh;
 use bronchosim::volume::{marching_cubes, Volume};
 use std::collections::HashSet;
 
-/// A seeded normal random generator (LCG + Box–Muller), so failures reproduce.
-struct Rng(u64);
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn normal(&mut self) -> f64 {
-        let (u, v) = (self.uniform(), self.uniform());
-        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
-    }
-}
+use bronchosim::rng::SplitMix64 as Rng;
 
 /// Anisotropic grid, rotated about z, optionally mirrored (negative determinant).
 fn affine(spacing: [f64; 3], mirrored: bool, origin: [f64; 3]) -> Affine {
@@ -53,7 +39,7 @@ fn ct_volume(
     seed: u64,
 ) -> Volume<f32> {
     let mut v = Volume::filled(dims, a, 0f32);
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     for k in 0..dims[2] {
         for j in 0..dims[1] {
             for i in 0..dims[0] {

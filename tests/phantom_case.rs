@@ -3,9 +3,9 @@
 
 use bronchosim::camera::Camera;
 use bronchosim::io::camera_file::read_camera;
-use bronchosim::io::frames::read_png;
 use bronchosim::io::mesh_export::read_ply;
 use bronchosim::io::nifti::read_nifti;
+use bronchosim::io::png::read_png;
 use bronchosim::io::poses::{read_poses, FrameRef};
 use bronchosim::phantom::{
     write_phantom_case, AirwayTree, CtPhantomOptions, PhantomOptions, TreeOptions,
@@ -120,7 +120,7 @@ fn phantom_case_is_deterministic_in_air_well_exposed_and_consistent() {
     let poses = read_poses(&a.join("poses.json"), &a).unwrap();
     assert_eq!(poses.len(), 6);
     for p in &poses {
-        let c = p.centre();
+        let c = p.pose.centre();
         let hu = ct.sample_world(c).expect("camera inside the CT grid");
         assert!(hu < -700.0, "camera at {c:?} sees {hu} HU");
         let d = tree.lumen_sdf(c);
@@ -161,17 +161,17 @@ fn phantom_case_is_deterministic_in_air_well_exposed_and_consistent() {
     let views = read_poses(&truth.join("views.json"), &truth).unwrap();
     assert_eq!(views.len(), 4);
     for (k, v) in views.iter().enumerate() {
-        assert!(tree.lumen_sdf(v.centre()) < -1.0);
+        assert!(tree.lumen_sdf(v.pose.centre()) < -1.0);
         // Off the training path: at least 0.3 mm from every training centre.
         let nearest = poses
             .iter()
-            .map(|p| (p.centre() - v.centre()).norm())
+            .map(|p| (p.pose.centre() - v.pose.centre()).norm())
             .fold(f64::INFINITY, f64::min);
         assert!(
             nearest > 0.3,
             "view {k} is {nearest} mm from a training pose"
         );
-        let gb = cast_frame(&scene, &cam, &v.camera_to_world);
+        let gb = cast_frame(&scene, &cam, &v.pose.camera_to_world);
         let (mask, w, h) = read_gray(&truth.join(format!("views/{k:06}_mask.png")));
         let (depth, _, _) = read_gray(&truth.join(format!("views/{k:06}_depth.png")));
         assert_eq!((w, h), (96, 96));
@@ -229,10 +229,10 @@ fn phantom_from_a_real_mask() {
     let ct = read_nifti(&out.join("ct.nii.gz")).unwrap();
     let poses = read_poses(&out.join("poses.json"), &out).unwrap();
     for p in &poses {
-        let hu = ct.sample_world(p.centre()).unwrap();
+        let hu = ct.sample_world(p.pose.centre()).unwrap();
         assert!(hu < -700.0, "{hu}");
     }
     // The path descends: the last camera is at least 60 mm below the first.
-    let dz = poses[0].centre().z - poses[poses.len() - 1].centre().z;
+    let dz = poses[0].pose.centre().z - poses[poses.len() - 1].pose.centre().z;
     assert!(dz > 60.0, "descent {dz} mm");
 }

@@ -115,15 +115,15 @@ fn no_cracks_at_shared_edges_and_vertices() {
 #[test]
 fn closed_mesh_random_rays_never_escape() {
     let mut m = icosphere(10.0, 4);
-    let mut rng = Rng(11);
+    let mut rng = Rng::new(11);
     for p in &mut m.positions {
-        let s = 1.0 + 0.05 * rng.range(-1.0, 1.0);
+        let s = 1.0 + 0.05 * rng.range_f32(-1.0, 1.0);
         *p = Point3::new(p.x * s, p.y * s, p.z * s);
     }
     let scene = Scene::new(&m).unwrap();
     for _ in 0..10_000 {
-        let o = meshes::scale(rng.unit(), rng.range(0.0, 5.0));
-        let d = rng.unit();
+        let o = meshes::scale(rng.unit_vector(), rng.range_f32(0.0, 5.0));
+        let d = rng.unit_vector();
         let h = scene.closest_hit(o, d, f32::INFINITY);
         assert!(
             h.is_some_and(|h| h.t > 3.0 && h.t < 20.0),
@@ -138,23 +138,23 @@ fn closed_mesh_random_rays_never_escape() {
 #[test]
 fn bvh_agrees_with_brute_force() {
     let mut m = icosphere(12.0, 3);
-    let mut rng = Rng(42);
+    let mut rng = Rng::new(42);
     for p in &mut m.positions {
-        let s = 1.0 + 0.08 * rng.range(-1.0, 1.0);
+        let s = 1.0 + 0.08 * rng.range_f32(-1.0, 1.0);
         *p = Point3::new(p.x * s, p.y * s, p.z * s);
     }
     for _ in 0..2000 {
         let c = [
-            rng.range(-10.0, 10.0),
-            rng.range(-10.0, 10.0),
-            rng.range(-10.0, 10.0),
+            rng.range_f32(-10.0, 10.0),
+            rng.range_f32(-10.0, 10.0),
+            rng.range_f32(-10.0, 10.0),
         ];
         let base = m.positions.len() as u32;
         for _ in 0..3 {
             m.positions.push(Point3::new(
-                c[0] + rng.range(-1.5, 1.5),
-                c[1] + rng.range(-1.5, 1.5),
-                c[2] + rng.range(-1.5, 1.5),
+                c[0] + rng.range_f32(-1.5, 1.5),
+                c[1] + rng.range_f32(-1.5, 1.5),
+                c[2] + rng.range_f32(-1.5, 1.5),
             ));
         }
         m.triangles.push([base, base + 1, base + 2]);
@@ -165,11 +165,11 @@ fn bvh_agrees_with_brute_force() {
         // Even rays: the default (eight-wide on AVX2) BVH; odd rays: the portable four-wide one.
         let scene = &scenes[k % 2];
         let o = [
-            rng.range(-14.0, 14.0),
-            rng.range(-14.0, 14.0),
-            rng.range(-14.0, 14.0),
+            rng.range_f32(-14.0, 14.0),
+            rng.range_f32(-14.0, 14.0),
+            rng.range_f32(-14.0, 14.0),
         ];
-        let d = rng.unit();
+        let d = rng.unit_vector();
         let bvh = scene.closest_hit(o, d, f32::INFINITY);
         let brute = brute_closest(&m, o, d, f32::INFINITY);
         match (bvh, brute) {
@@ -188,7 +188,7 @@ fn bvh_agrees_with_brute_force() {
             }
             (a, b) => panic!("ray {o:?} {d:?}: BVH {a:?}, brute force {b:?}"),
         }
-        let tmax = rng.range(0.0, 30.0);
+        let tmax = rng.range_f32(0.0, 30.0);
         assert_eq!(
             scene.any_hit(o, d, tmax),
             brute_closest(&m, o, d, tmax).is_some()
@@ -365,7 +365,7 @@ fn gbuffer_matches_analytic_cylinder() {
 fn packets_match_single_rays() {
     let (m, _) = meshes::branching_airway(0.6);
     let scenes = [Scene::new(&m).unwrap(), Scene::new_four_wide(&m).unwrap()];
-    let mut rng = Rng(99);
+    let mut rng = Rng::new(99);
     // (origin, forward, field of view scale, tmax)
     let views: [([f32; 3], [f32; 3], f32, f32); 5] = [
         ([0.5, -0.8, 30.0], [0.1, 0.05, 1.0], 1.0, f32::INFINITY),
@@ -394,7 +394,7 @@ fn packets_match_single_rays() {
         }
         // Then incoherent packets: random directions, a few of them axis-aligned.
         for k in 0..16 * 20 + 5 {
-            let mut d = rng.unit();
+            let mut d = rng.unit_vector();
             if k % 29 == 0 {
                 d = [0.0, 0.0, if k % 2 == 0 { 1.0 } else { -1.0 }];
             }

@@ -7,7 +7,8 @@
 use std::path::Path;
 
 use bronchosim::camera::Camera;
-use bronchosim::io::frames::{linear_to_srgb, srgb_to_linear, Frame};
+use bronchosim::image::srgb::{linear_to_srgb, srgb_to_linear};
+use bronchosim::image::Frame;
 use bronchosim::math::{Affine, Point3, Vector3};
 use bronchosim::mesh::TriMesh;
 use bronchosim::raycast::{cast_frame, Scene};

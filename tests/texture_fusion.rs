@@ -8,7 +8,7 @@ mod texture_support;
 use std::sync::OnceLock;
 
 use bronchosim::camera::Camera;
-use bronchosim::io::frames::Frame;
+use bronchosim::image::Frame;
 use bronchosim::math::{Affine, Point3};
 use bronchosim::mesh::TriMesh;
 use bronchosim::raycast::{cast_frame, Scene};
@@ -398,7 +398,7 @@ fn outputs_are_written_and_uvs_address_the_albedo() {
     let dir = tempfile::tempdir().expect("tmp");
     let out = write_texture_outputs(dir.path(), &w.atlas, &filled, &f.covered).expect("write");
     assert_eq!(out.covered_texels, f.stats.covered_texels);
-    let albedo_png = bronchosim::io::frames::read_png(&dir.path().join("albedo.png")).expect("png");
+    let albedo_png = bronchosim::io::png::read_png(&dir.path().join("albedo.png")).expect("png");
     assert_eq!(
         (albedo_png.width, albedo_png.height),
         (w.atlas.width, w.atlas.height)
@@ -412,7 +412,7 @@ fn outputs_are_written_and_uvs_address_the_albedo() {
         let got = albedo_png.rgb[3 * t + c];
         assert!((got - want).abs() < 0.01 + 0.02 * want, "{got} vs {want}");
     }
-    let cov = bronchosim::io::frames::read_png(&dir.path().join("coverage.png")).expect("png");
+    let cov = bronchosim::io::png::read_png(&dir.path().join("coverage.png")).expect("png");
     let n_cov = cov.rgb.chunks(3).filter(|p| p[0] > 0.5).count();
     assert_eq!(n_cov, f.stats.covered_texels);
     let glb = std::fs::read(dir.path().join("airway.glb")).expect("glb");

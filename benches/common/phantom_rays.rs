@@ -15,6 +15,7 @@ use bronchosim::io::poses::read_poses;
 use bronchosim::mesh::TriMesh;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::raycast::Scene;
+use bronchosim::rng::SplitMix64;
 use std::path::{Path, PathBuf};
 
 /// Rays, origin and unit direction each (world mm).
@@ -40,34 +41,6 @@ pub struct PhantomBench {
 pub const SIDE: usize = 512;
 pub const FOCAL: f64 = 256.0;
 
-/// SplitMix64: a small seeded generator, so that the rays do not depend on a crate's version.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn f32(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    /// Uniform unit vector (rejection from the cube).
-    fn unit(&mut self) -> [f32; 3] {
-        loop {
-            let v = [0, 1, 2].map(|_| 2.0 * self.f32() - 1.0);
-            let l2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-            if l2 > 1e-4 && l2 <= 1.0 {
-                let l = l2.sqrt();
-                return v.map(|c| c / l);
-            }
-        }
-    }
-}
-
 /// Load (writing it first when `dir/case` does not exist) the benchmark scene.
 pub fn phantom_bench(dir: &Path) -> Result<PhantomBench, Box<dyn std::error::Error>> {
     let case = dir.join("case");
@@ -83,7 +56,7 @@ pub fn phantom_bench(dir: &Path) -> Result<PhantomBench, Box<dyn std::error::Err
     let mesh_path = case.join("truth").join("lumen.ply");
     let mesh = read_ply(&mesh_path)?;
     let poses = read_poses(&case.join("poses.json"), &case)?;
-    let m = poses[4.min(poses.len() - 1)].camera_to_world;
+    let m = poses[4.min(poses.len() - 1)].pose.camera_to_world;
     let pose: [[f64; 4]; 4] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]));
     let org = [0, 1, 2].map(|i| pose[i][3] as f32);
     let mut camera = BenchRays {
@@ -103,25 +76,25 @@ pub fn phantom_bench(dir: &Path) -> Result<PhantomBench, Box<dyn std::error::Err
     let scene = Scene::new(&mesh)?;
     let centres: Vec<[f32; 3]> = poses
         .iter()
-        .map(|p| [0, 1, 2].map(|i| p.camera_to_world[(i, 3)] as f32))
+        .map(|p| [0, 1, 2].map(|i| p.pose.camera_to_world[(i, 3)] as f32))
         .collect();
-    let mut rng = Rng(0x5EED);
+    let mut rng = SplitMix64::new(0x5EED);
     let n = 1 << 20;
     let mut random = BenchRays {
         origins: Vec::with_capacity(n),
         dirs: Vec::with_capacity(n),
     };
     while random.dirs.len() < n {
-        let c = centres[(rng.next() % centres.len() as u64) as usize];
-        let d = rng.unit();
+        let c = centres[(rng.next_u64() % centres.len() as u64) as usize];
+        let d = rng.unit_vector();
         let Some(h) = scene.closest_hit(c, d, f32::INFINITY) else {
             continue;
         };
-        let s = h.t * (0.05 + 0.9 * rng.f32());
+        let s = h.t * (0.05 + 0.9 * rng.uniform_f32());
         random
             .origins
             .push([c[0] + s * d[0], c[1] + s * d[1], c[2] + s * d[2]]);
-        random.dirs.push(rng.unit());
+        random.dirs.push(rng.unit_vector());
     }
     Ok(PhantomBench {
         mesh_path,

@@ -4,8 +4,10 @@
 //! Every formula matches OpenCV (cv2.projectPoints, cv2.undistortPoints,
 //! cv2.initUndistortRectifyMap); tests/camera_opencv.rs pins the agreement to 1e-3 px.
 
+pub mod pose;
 mod undistort;
 
+pub use pose::Pose;
 pub use undistort::{remap_bilinear, RemapPlan, UndistortMap};
 
 use crate::math::{Matrix3, Point2, Point3, Vector2, Vector3};

@@ -2,10 +2,10 @@
 //! stream the frames on demand.
 
 use crate::camera::Camera;
+use crate::image::Frame;
 use crate::io::camera_file::{find_camera, read_camera};
 use crate::io::ct::{find_ct, read_ct, CtInfo, CtSource};
 use crate::io::frame_source::FrameSource;
-use crate::io::frames::Frame;
 use crate::io::poses::{read_poses, FrameRef, PoseEntry};
 use crate::io::video::VideoReader;
 use crate::volume::Volume;
@@ -156,7 +156,7 @@ impl Case {
         match &self.frames {
             FramesLocation::Png { files, .. } => {
                 files.par_iter().try_for_each(|f| {
-                    let frame = crate::io::frames::read_png(f)?;
+                    let frame = crate::io::png::read_png(f)?;
                     check_frame_size(f, frame.width, frame.height, &self.camera)
                 })?;
                 Ok(files.len())

@@ -2,7 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::io::frames::{read_png, Frame};
+use crate::image::Frame;
+use crate::io::png::read_png;
 use crate::io::poses::{FrameRef, PoseEntry};
 use crate::io::video::VideoReader;
 use crate::{Error, Result};

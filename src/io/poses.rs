@@ -8,15 +8,10 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
+use crate::camera::pose::{validate_pose, Pose};
 use crate::io::paths::{relative_slash_path, resolve_case_relative};
-use crate::math::{Affine, Matrix3, Point3, Vector3};
+use crate::math::Affine;
 use crate::{Error, Result};
-
-/// Largest allowed deviation of `RᵀR` from the identity (any entry) and of `det R` from +1.
-pub const ROTATION_TOLERANCE: f64 = 1e-4;
-
-/// Largest allowed deviation of the last matrix row from `0 0 0 1` (printing round-off only).
-pub const LAST_ROW_TOLERANCE: f64 = 1e-9;
 
 /// Which image a pose belongs to.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -34,89 +29,7 @@ pub struct PoseEntry {
     /// The frame this pose belongs to.
     pub frame: FrameRef,
     /// Camera coordinates (mm) → world coordinates (mm, RAS+); a rigid transform.
-    pub camera_to_world: Affine,
-}
-
-/// The name the crate root documentation uses for a pose entry.
-pub type Pose = PoseEntry;
-
-impl PoseEntry {
-    /// The camera centre (and light position) in world mm.
-    pub fn centre(&self) -> Point3<f64> {
-        camera_centre(&self.camera_to_world)
-    }
-
-    /// The unit viewing direction (camera +z) in world coordinates.
-    pub fn viewing_direction(&self) -> Vector3<f64> {
-        viewing_direction(&self.camera_to_world)
-    }
-
-    /// The world→camera transform (inverse of the rigid camera→world).
-    pub fn world_to_camera(&self) -> Affine {
-        rigid_inverse(&self.camera_to_world)
-    }
-}
-
-/// The camera centre in world mm: the translation column of camera→world.
-pub fn camera_centre(camera_to_world: &Affine) -> Point3<f64> {
-    Point3::new(
-        camera_to_world[(0, 3)],
-        camera_to_world[(1, 3)],
-        camera_to_world[(2, 3)],
-    )
-}
-
-/// The unit viewing direction in world coordinates: the image of camera +z.
-pub fn viewing_direction(camera_to_world: &Affine) -> Vector3<f64> {
-    Vector3::new(
-        camera_to_world[(0, 2)],
-        camera_to_world[(1, 2)],
-        camera_to_world[(2, 2)],
-    )
-    .normalize()
-}
-
-/// Inverse of a rigid transform `[R t; 0 1]`: `[Rᵀ -Rᵀt; 0 1]` (exact, no general inversion).
-pub fn rigid_inverse(m: &Affine) -> Affine {
-    let r = m.fixed_view::<3, 3>(0, 0).transpose();
-    let t = -(r * m.fixed_view::<3, 1>(0, 3));
-    let mut out = Affine::identity();
-    out.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
-    out.fixed_view_mut::<3, 1>(0, 3).copy_from(&t);
-    out
-}
-
-/// Check that `m` is a camera→world pose: finite, last row `0 0 0 1`, rotation orthonormal
-/// with determinant +1 (within [`ROTATION_TOLERANCE`]). The message says what is wrong.
-pub fn validate_pose(m: &Affine) -> std::result::Result<(), String> {
-    if let Some(k) = (0..16).find(|&k| !m[(k / 4, k % 4)].is_finite()) {
-        return Err(format!("element {k} is not finite ({})", m[(k / 4, k % 4)]));
-    }
-    let last = [m[(3, 0)], m[(3, 1)], m[(3, 2)], m[(3, 3)]];
-    if last
-        .iter()
-        .zip([0.0, 0.0, 0.0, 1.0])
-        .any(|(a, b)| (a - b).abs() > LAST_ROW_TOLERANCE)
-    {
-        return Err(format!(
-            "last row is {} {} {} {}, expected 0 0 0 1",
-            last[0], last[1], last[2], last[3]
-        ));
-    }
-    let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
-    let off = (r.transpose() * r - Matrix3::identity()).abs().max();
-    if off > ROTATION_TOLERANCE {
-        return Err(format!(
-            "rotation is not orthonormal (max |RᵀR - I| = {off:.3e} > {ROTATION_TOLERANCE:e})"
-        ));
-    }
-    let det = r.determinant();
-    if (det - 1.0).abs() > ROTATION_TOLERANCE {
-        return Err(format!(
-            "rotation has determinant {det:.6}, expected +1 (a reflection is not a camera pose)"
-        ));
-    }
-    Ok(())
+    pub pose: Pose,
 }
 
 /// Read and validate poses.json at `path`; `"image"` paths are resolved inside `case_dir`.
@@ -246,7 +159,7 @@ fn parse_entry(entry: &Value, i: usize, path: &Path, case_dir: &Path) -> Result<
     validate_pose(&m).map_err(|msg| bad(format!("camera_to_world: {msg}")))?;
     Ok(PoseEntry {
         frame,
-        camera_to_world: m,
+        pose: Pose::new(m),
     })
 }
 
@@ -268,7 +181,8 @@ pub fn write_poses(path: &Path, poses: &[PoseEntry], base_dir: &Path) -> Result<
     }
     let mut text = String::from("{ \"frames\": [\n");
     for (i, pose) in poses.iter().enumerate() {
-        validate_pose(&pose.camera_to_world)
+        pose.pose
+            .validate()
             .map_err(|msg| Error::Other(format!("{}: frame {i}: {msg}", path.display())))?;
         let frame = match &pose.frame {
             FrameRef::Image(p) => {
@@ -277,7 +191,7 @@ pub fn write_poses(path: &Path, poses: &[PoseEntry], base_dir: &Path) -> Result<
             }
             FrameRef::VideoIndex(n) => format!("\"frame\": {n}"),
         };
-        let m = &pose.camera_to_world;
+        let m = &pose.pose.camera_to_world;
         let numbers: Vec<String> = (0..16)
             .map(|k| serde_json::Value::from(m[(k / 4, k % 4)]).to_string())
             .collect();

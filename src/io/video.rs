@@ -13,7 +13,8 @@ use std::thread::JoinHandle;
 
 use serde_json::Value;
 
-use crate::io::frames::{srgb16_to_linear_lut, srgb8_to_linear_lut, Frame};
+use crate::image::srgb::{srgb16_to_linear_lut, srgb8_to_linear_lut};
+use crate::image::Frame;
 use crate::{Error, Result};
 
 /// How many of ffmpeg's last stderr lines are kept for error messages.

@@ -325,13 +325,8 @@ mod tests {
     fn grid_distance_matches_brute_force() {
         let m = tetra();
         let grid = TriangleGrid::new(&m);
-        let mut s = 12345u64;
-        let mut rnd = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 11) as f64 / (1u64 << 53) as f64) * 4.0 - 2.0
-        };
+        let mut rng = crate::rng::SplitMix64::new(12345);
+        let mut rnd = || rng.range(-2.0, 2.0);
         for _ in 0..500 {
             let p = Point3::new(rnd() as f32, rnd() as f32, rnd() as f32);
             let q = p.coords.cast::<f64>();

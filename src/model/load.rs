@@ -5,8 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use super::manifest::{ModelManifest, ShadingFile, MODEL_FORMAT_VERSION};
-use crate::io::frames::{decode_png_bytes, read_png};
 use crate::io::glb_import::read_glb;
+use crate::io::png::{decode_png_bytes, read_png};
 use crate::mesh::TriMesh;
 use crate::raycast::Scene;
 use crate::render::{MipOptions, MipTexture, RenderInputs, ViewpointIndex};
@@ -46,7 +46,7 @@ fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<
 /// A texture PNG (linear after decoding) divided back to the relative albedo the shading
 /// multiplies: `png / (albedo_scale · colour_balance)`, with its mip chain.
 fn relative_texture(
-    mut image: crate::io::frames::Frame,
+    mut image: crate::image::Frame,
     scale: f32,
     balance: [f32; 3],
     texel_mm: f64,

@@ -113,13 +113,11 @@ fn smoothstep(a: f64, b: f64, x: f64) -> f64 {
 /// 64-bit integer hash of a lattice cell and a seed (SplitMix64-style finaliser).
 #[inline]
 fn hash3(i: i64, j: i64, k: i64, seed: u64) -> u64 {
-    let mut h = seed
+    let h = seed
         ^ (i as u64).wrapping_mul(0x9E3779B97F4A7C15)
         ^ (j as u64).wrapping_mul(0xC2B2AE3D27D4EB4F)
         ^ (k as u64).wrapping_mul(0x165667B19E3779F9);
-    h = (h ^ (h >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
-    h = (h ^ (h >> 27)).wrapping_mul(0x94D049BB133111EB);
-    h ^ (h >> 31)
+    crate::rng::mix64(h)
 }
 
 /// Uniform in [0, 1) from 21 bits of `h` starting at bit `shift`.
@@ -204,7 +202,7 @@ fn cell_border_distance(p: &[f64; 3], cell: f64, seed: u64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::phantom::rng::Pcg32;
+    use crate::rng::Pcg32;
 
     #[test]
     fn albedo_is_deterministic_pinkish_with_vessels_and_pale_patches() {

@@ -9,8 +9,8 @@
 //! World coordinates are RAS+ mm (+x patient right, +y anterior, +z superior) with the
 //! carina at the origin.
 
-use super::rng::Pcg32;
 use crate::math::{Point3, Vector3};
+use crate::rng::Pcg32;
 
 /// World direction of the patient's right in RAS+.
 pub const RIGHT: Vector3<f64> = Vector3::new(1.0, 0.0, 0.0);

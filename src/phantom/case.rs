@@ -18,10 +18,12 @@ use super::render::{auto_gain, expose, render_radiance, LightModel, SensorModel,
 use super::truth_io::{write_albedo_ply, write_gray16_png, write_gray8_png, write_linear16_png};
 use super::truth_mesh::{mask_truth_mesh, tree_truth_mesh};
 use crate::camera::Camera;
+use crate::camera::Pose;
+use crate::image::Frame;
 use crate::io::camera_file::write_camera_json;
-use crate::io::frames::{write_png_srgb8, Frame};
 use crate::io::mesh_export::write_ply;
 use crate::io::nifti::write_nifti;
+use crate::io::png::write_png_srgb8;
 use crate::io::poses::{write_poses, FrameRef, PoseEntry};
 use crate::math::{Affine, Point3};
 use crate::mesh::TriMesh;
@@ -272,7 +274,7 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
         });
         entries.push(PoseEntry {
             frame: FrameRef::Image(path),
-            camera_to_world: *pose,
+            pose: Pose::new(*pose),
         });
     }
     write_poses(&dir.join("poses.json"), &entries, dir)?;
@@ -322,7 +324,7 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
         )?;
         ventries.push(PoseEntry {
             frame: FrameRef::Image(vdir.join(format!("{k:06}.png"))),
-            camera_to_world: *v,
+            pose: Pose::new(*v),
         });
     }
     write_poses(&truth.join("views.json"), &ventries, &truth)?;

@@ -7,8 +7,8 @@
 //! flipped (LPS-like) affine.
 
 use super::anatomy::{AirwayTree, TreeOptions};
-use super::rng::Pcg32;
 use crate::math::{Affine, Point3};
+use crate::rng::Pcg32;
 use crate::volume::Volume;
 use crate::{Error, Result};
 use rayon::prelude::*;

@@ -2,9 +2,9 @@
 //! a soft-tissue wall, parenchyma with texture, partial volume, noise, the mask's own affine,
 //! and a body outline with outside air when the grid has room for one.
 
-use super::rng::Pcg32;
 use crate::io::nifti::read_nifti;
 use crate::math::Vector4;
+use crate::rng::Pcg32;
 use crate::volume::morphology::dilate;
 use crate::volume::segment::{bounding_box, crop};
 use crate::volume::Volume;

@@ -10,7 +10,6 @@ pub mod from_mask;
 pub mod mask_path;
 pub mod path;
 pub mod render;
-pub mod rng;
 pub mod truth_io;
 pub mod truth_mesh;
 

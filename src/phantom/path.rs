@@ -6,8 +6,8 @@
 //! pulled toward the centreline until it keeps `min_clearance_mm` of air around the lens.
 
 use super::anatomy::AirwayTree;
-use super::rng::Pcg32;
 use crate::math::{Affine, Point3, Vector3};
+use crate::rng::Pcg32;
 use crate::{Error, Result};
 
 /// How the camera moves along the centreline. Lengths in mm, angles in degrees.
@@ -405,7 +405,7 @@ pub fn novel_views(
 mod tests {
     use super::*;
     use crate::phantom::anatomy::TreeOptions;
-    use crate::phantom::rng::Pcg32;
+    use crate::rng::Pcg32;
 
     #[test]
     fn tree_path_stays_inside_and_moves_down_the_airway() {

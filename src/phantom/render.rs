@@ -11,11 +11,11 @@
 //! percentile of pixels clips), Poisson–Gaussian noise and clipping at 1.0 (saturation).
 
 use super::albedo::MucosaAlbedo;
-use super::rng::Pcg32;
 use crate::camera::Camera;
-use crate::io::frames::Frame;
+use crate::image::Frame;
 use crate::math::Affine;
 use crate::raycast::{cast_frame_with, RayTable, Scene};
+use crate::rng::Pcg32;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 

@@ -1,7 +1,7 @@
 //! Writers for the phantom's truth files (the per-vertex albedo PLY and the single-channel and
 //! linear 16-bit PNGs of the novel views) and the reader of those PNGs.
 
-use crate::io::frames::Frame;
+use crate::image::Frame;
 use crate::io::mesh_export::write_ply_with_colours;
 use crate::mesh::TriMesh;
 use crate::{Error, Result};

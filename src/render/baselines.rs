@@ -9,9 +9,9 @@
 use rayon::prelude::*;
 
 use super::shading_lookup::ViewpointIndex;
+use crate::camera::pose::rigid_inverse;
 use crate::camera::Camera;
-use crate::io::frames::Frame;
-use crate::io::poses::rigid_inverse;
+use crate::image::Frame;
 use crate::math::{transform_point, Affine, Point3};
 use crate::raycast::{cast_frame, cast_frame_with, GBuffer, RayTable, Scene};
 use crate::{Error, Result};

@@ -18,7 +18,8 @@
 
 use serde::Serialize;
 
-use crate::io::frames::{linear_to_srgb, Frame};
+use crate::image::srgb::linear_to_srgb;
+use crate::image::Frame;
 use crate::{Error, Result};
 
 /// PSNR reported for identical images (dB).

@@ -6,7 +6,7 @@ use rayon::prelude::*;
 use super::shading_lookup::{ShadingMode, ViewShader, ViewpointIndex};
 use super::texture_sampler::MipTexture;
 use crate::camera::Camera;
-use crate::io::frames::Frame;
+use crate::image::Frame;
 use crate::math::Affine;
 use crate::raycast::Scene;
 use crate::shading::frame_shading::LUMA;

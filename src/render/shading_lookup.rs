@@ -7,7 +7,7 @@
 //! `w_i ∝ (1 - p_i / p_k+1) / p_i`. A viewpoint's weight reaches 0 exactly when it leaves the
 //! k nearest, so the shading changes continuously along any camera path.
 
-use crate::io::poses::{camera_centre, viewing_direction};
+use crate::camera::pose::{camera_centre, viewing_direction};
 use crate::math::{Affine, Point3, Vector3};
 use crate::shading::psi::PsiModel;
 use crate::shading::CalibratedModel;

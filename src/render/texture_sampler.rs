@@ -12,7 +12,7 @@
 //! renderer's supersampling option; on the airway wall neighbouring charts carry similar mucosa,
 //! so the bleed of the capped levels is a slight blur, not a visible seam.
 
-use crate::io::frames::Frame;
+use crate::image::Frame;
 use crate::{Error, Result};
 
 /// Options of [`MipTexture::new`].

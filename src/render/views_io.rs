@@ -10,8 +10,9 @@ use std::path::{Path, PathBuf};
 use super::evaluate::{evaluate_methods, MaskedImage, MethodScore};
 use super::novel_view::{render_view_with, RenderInputs, RenderOptions, ViewRays};
 use crate::camera::Camera;
-use crate::io::frames::{read_png, write_png_srgb8, Frame};
+use crate::image::Frame;
 use crate::io::paths::relative_slash_path;
+use crate::io::png::{read_png, write_png_srgb8};
 use crate::io::poses::{read_poses, FrameRef};
 use crate::math::Affine;
 use crate::{Error, Result};
@@ -38,7 +39,7 @@ pub fn read_views(views_json: &Path, base_dir: &Path) -> Result<Vec<View>> {
             FrameRef::Image(path) => Ok(View {
                 name: relative_slash_path(base_dir, &path, views_json)?,
                 path,
-                camera_to_world: p.camera_to_world,
+                camera_to_world: p.pose.camera_to_world,
             }),
             FrameRef::VideoIndex(_) => Err(Error::invalid(
                 views_json,

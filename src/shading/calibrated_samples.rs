@@ -10,6 +10,7 @@
 use super::frame_shading::LUMA;
 use super::samples::{ExclusionCounts, SampleOptions};
 use super::weights::WeightOptions;
+use crate::rng::splitmix64;
 use crate::{Error, Result};
 use rayon::prelude::*;
 
@@ -144,14 +145,6 @@ impl PooledSamples {
     }
 }
 
-/// SplitMix64 hash: the reproducible jitter of the subsample.
-fn hash(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
 /// Pool the samples of `frames` (parallel over frames). Errors name the frame whose slices
 /// disagree in length.
 pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSamples> {
@@ -225,7 +218,7 @@ pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSam
             let step = keep.len() as f64 / m as f64;
             (0..m)
                 .map(|j| {
-                    let u = (hash(opts.seed ^ ((f as u64) << 32) ^ j as u64) >> 11) as f64
+                    let u = (splitmix64(opts.seed ^ ((f as u64) << 32) ^ j as u64) >> 11) as f64
                         / (1u64 << 53) as f64;
                     keep[(((j as f64) + u) * step) as usize % keep.len()]
                 })

@@ -16,7 +16,7 @@ use rayon::prelude::*;
 
 use super::texels::{BlockSphere, TexelSet, BLOCK};
 use crate::camera::Camera;
-use crate::io::frames::Frame;
+use crate::image::Frame;
 use crate::math::Affine;
 use crate::shading::frame_shading::FrameShading;
 use crate::shading::SampleOptions;

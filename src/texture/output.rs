@@ -8,8 +8,8 @@
 use std::path::Path;
 
 use super::atlas::Atlas;
+use crate::image::srgb::linear_to_srgb8;
 use crate::io::atomic::write_bytes_atomic;
-use crate::io::frames::linear_to_srgb8;
 use crate::io::mesh_export::write_glb;
 use crate::{Error, Result};
 

@@ -225,7 +225,7 @@ mod tests {
     #[test]
     fn distance_transform_matches_brute_force_with_anisotropic_spacing() {
         let dims = [13, 11, 9];
-        let mut r = crate::phantom::rng::Pcg32::new(5, 1);
+        let mut r = crate::rng::Pcg32::new(5, 1);
         let feat: Vec<bool> = (0..dims[0] * dims[1] * dims[2])
             .map(|_| r.uniform() < 0.02)
             .collect();

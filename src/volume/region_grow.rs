@@ -304,7 +304,7 @@ mod tests {
 
     #[test]
     fn scanline_fill_equals_breadth_first_fill_on_random_volumes() {
-        let mut r = crate::phantom::rng::Pcg32::new(3, 3);
+        let mut r = crate::rng::Pcg32::new(3, 3);
         for t in 0..20 {
             let dims = [17 + t, 13, 11];
             let data: Vec<f32> = (0..dims[0] * dims[1] * dims[2])

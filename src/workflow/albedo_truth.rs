@@ -9,7 +9,7 @@
 
 use std::path::Path;
 
-use crate::io::frames::read_png;
+use crate::io::png::read_png;
 use crate::model::Model;
 use crate::phantom::truth_io::read_png16;
 use crate::raycast::cast_frame;

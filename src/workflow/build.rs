@@ -4,9 +4,9 @@
 //! inspect → segment → lumen mesh → atlas → per frame (ray cast, samples, Psi fit) →
 //! de-light and fuse (two streaming passes over the frames) → model folder.
 
+use crate::image::Frame;
 use crate::io::atomic::write_bytes_atomic;
 use crate::io::case::Case;
-use crate::io::frames::Frame;
 use crate::io::nifti::write_nifti;
 use crate::io::output_dir::OutputDir;
 use crate::math::Affine;
@@ -268,7 +268,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     };
     for (i, frame) in case.frame_source()?.enumerate() {
         let frame = frame?;
-        let pose = &case.poses[i].camera_to_world;
+        let pose = &case.poses[i].pose.camera_to_world;
         let g = cast_frame_with(&scene, &rays, pose);
         let (samples, model, mut ff) = fit_frame(&frame, &g, pose, opts)
             .map_err(|e| Error::Other(format!("frame {i} ({}): {e}", frame_name(&case, i))))?;

@@ -2,9 +2,9 @@
 //! source (never all in memory), each with its depth buffer (cached from the fit pass while
 //! the cache fits its memory budget, else ray cast again) and its fitted shading.
 
+use crate::image::Frame;
 use crate::io::case::Case;
 use crate::io::frame_source::FrameSource;
-use crate::io::frames::Frame;
 use crate::raycast::{cast_frame_with, RayTable, Scene};
 use crate::shading::frame_shading::FrameShading;
 use crate::shading::psi::PsiModel;
@@ -132,7 +132,7 @@ impl FrameStream for CaseFrames<'_> {
             }
             self.next += 1;
         }
-        let pose = &self.case.poses[index].camera_to_world;
+        let pose = &self.case.poses[index].pose.camera_to_world;
         let depth: &[f32] = match self.cache.get(index) {
             Some(d) => d,
             None => {

@@ -10,8 +10,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::image::Frame;
 use crate::io::case::Case;
-use crate::io::frames::Frame;
 use crate::raycast::{cast_frame_with, RayTable, Scene};
 use crate::render::{
     evaluate_methods, render_view_with, MaskedImage, MipOptions, MipTexture, RenderInputs,
@@ -121,7 +121,7 @@ pub fn cross_validate(
     // The held-out frames and the pixels of each that obey the model.
     let mut frames: Vec<(usize, Frame, Vec<bool>)> = Vec::with_capacity(held.len());
     for (i, f) in inp.case.frames_at(&held)? {
-        let g = cast_frame_with(inp.scene, inp.rays, &inp.case.poses[i].camera_to_world);
+        let g = cast_frame_with(inp.scene, inp.rays, &inp.case.poses[i].pose.camera_to_world);
         let s = inp.samples;
         let mask = (0..g.z.len())
             .map(|p| {
@@ -183,7 +183,7 @@ pub fn cross_validate(
         };
         let mut scores = Vec::new();
         for (i, frame, mask) in &frames {
-            let pose = &inp.case.poses[*i].camera_to_world;
+            let pose = &inp.case.poses[*i].pose.camera_to_world;
             let (pred, hit) = render_view_with(&inputs, &view_rays, pose, &opts)?;
             let truth = MaskedImage {
                 frame: frame.clone(),

@@ -14,11 +14,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Instant;
 
+use crate::camera::pose::camera_centre;
 use crate::camera::Camera;
-use crate::io::frames::write_png_srgb8;
+use crate::camera::Pose;
 use crate::io::nifti::read_nifti;
 use crate::io::output_dir::OutputDir;
-use crate::io::poses::{camera_centre, write_poses, FrameRef, PoseEntry};
+use crate::io::png::write_png_srgb8;
+use crate::io::poses::{write_poses, FrameRef, PoseEntry};
 use crate::math::{Affine, Point3, Vector3};
 use crate::model::Model;
 use crate::phantom::path::{look_pose, SmoothPath};
@@ -131,7 +133,7 @@ pub fn flythrough(
         write_png_srgb8(&path, &frame)?;
         entries.push(PoseEntry {
             frame: FrameRef::Image(path),
-            camera_to_world: *pose,
+            pose: Pose::new(*pose),
         });
         progress.inc();
     }

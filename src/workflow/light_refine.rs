@@ -92,7 +92,7 @@ pub fn refit_light_with_albedo(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::frames::Frame;
+    use crate::image::Frame;
     use crate::render::MipOptions;
 
     #[test]

@@ -4,9 +4,9 @@
 
 use std::path::Path;
 
+use crate::camera::pose::camera_centre;
+use crate::image::Frame;
 use crate::io::case::Case;
-use crate::io::frames::Frame;
-use crate::io::poses::camera_centre;
 use crate::math::{Affine, Vector3};
 use crate::model::Model;
 use crate::render::{render_view_with, MethodScore, RenderOptions, ViewRays};
@@ -104,8 +104,8 @@ pub fn novel_figure(model: &Model, case: &Case) -> Result<NewViewsFigure> {
     let mut rows = Vec::new();
     for &i in &wanted {
         let (a, b) = (
-            &case.poses[i].camera_to_world,
-            &case.poses[i + 1].camera_to_world,
+            &case.poses[i].pose.camera_to_world,
+            &case.poses[i + 1].pose.camera_to_world,
         );
         let pose = between_and_turned(a, b, 12f64.to_radians());
         let (view, _) = render_view_with(&inputs, &rays, &pose, &RenderOptions::default())?;

@@ -3,7 +3,8 @@
 //! (frame / predicted shading / extracted texture), the albedo atlas, fit quality over the
 //! video and per-stage timings.
 
-use crate::io::frames::{write_png_srgb8, Frame};
+use crate::image::Frame;
+use crate::io::png::write_png_srgb8;
 use crate::model::ModelManifest;
 use crate::raycast::{GBuffer, RayTable};
 use crate::shading::calibrated_plots::{plot_gains, plot_light_profile, plot_rho};

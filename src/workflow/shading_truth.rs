@@ -154,7 +154,7 @@ pub fn shading_residuals(
     let per_frame: Vec<FrameResiduals> = frames
         .par_iter()
         .map(|(&f, frame)| {
-            let gb = cast_frame_with(scene, &rays, &case.poses[f].camera_to_world);
+            let gb = cast_frame_with(scene, &rays, &case.poses[f].pose.camera_to_world);
             let hits: Vec<usize> = (0..gb.z.len()).filter(|&i| gb.hit(i)).collect();
             let albedo: Vec<[f32; 3]> = hits
                 .iter()

@@ -86,7 +86,7 @@ pub fn evaluate_against_truth(
         None => None,
     };
 
-    let poses: Vec<_> = case.poses.iter().map(|p| p.camera_to_world).collect();
+    let poses: Vec<_> = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
     let index = ViewpointIndex::from_poses(&poses);
     let near: Vec<usize> = views
         .iter()

@@ -8,33 +8,7 @@ use std::collections::HashMap;
 use std::f32::consts::PI;
 use std::io::Write;
 
-/// SplitMix64: a small seeded generator so failures reproduce.
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    pub fn f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    /// Uniform in [lo, hi).
-    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.f32()
-    }
-    /// Uniform unit vector.
-    pub fn unit(&mut self) -> [f32; 3] {
-        let z = self.range(-1.0, 1.0);
-        let a = self.range(0.0, 2.0 * PI);
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        [r * a.cos(), r * a.sin(), z]
-    }
-}
+pub use bronchosim::rng::SplitMix64 as Rng;
 
 /// Icosphere of radius `r` (mm) centred at the origin, `levels` subdivisions, shared vertices
 /// (closed, manifold), outward winding.
@@ -253,17 +227,17 @@ pub fn bench_scene() -> (TriMesh, BenchRays, BenchRays) {
                 .push(normalize(add(add(scale(right, x), scale(down, y)), fwd)));
         }
     }
-    let mut rng = Rng(7);
+    let mut rng = Rng::new(7);
     let mut rnd = BenchRays {
         origins: Vec::new(),
         dirs: Vec::new(),
     };
     for _ in 0..262_144 {
         let (p0, p1, r) = branches[(rng.next_u64() % branches.len() as u64) as usize];
-        let c = add(p0, scale(sub(p1, p0), rng.range(0.2, 0.9)));
-        let off = scale(rng.unit(), 0.4 * r);
+        let c = add(p0, scale(sub(p1, p0), rng.range_f32(0.2, 0.9)));
+        let off = scale(rng.unit_vector(), 0.4 * r);
         rnd.origins.push(add(c, off));
-        rnd.dirs.push(rng.unit());
+        rnd.dirs.push(rng.unit_vector());
     }
     (mesh, cam, rnd)
 }

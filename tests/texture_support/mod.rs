@@ -13,10 +13,10 @@ pub mod airway_mesh;
 #[path = "../common/physics.rs"]
 mod physics;
 use physics::brdf_cos;
-use std::f64::consts::PI;
 
 use bronchosim::camera::Camera;
-use bronchosim::io::frames::{linear_to_srgb8, srgb8_to_linear_lut, Frame};
+use bronchosim::image::srgb::{linear_to_srgb8, srgb8_to_linear_lut};
+use bronchosim::image::Frame;
 use bronchosim::math::{Affine, Vector3};
 use bronchosim::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
 use bronchosim::shading::{
@@ -43,24 +43,7 @@ pub fn albedo(p: [f64; 3]) -> [f64; 3] {
     std::array::from_fn(|c| base[c] * slow * tint[c])
 }
 
-/// A tiny deterministic generator (64-bit LCG + Box–Muller), so failures reproduce.
-pub struct Rng(u64);
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
-    }
-    pub fn uniform(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    pub fn normal(&mut self) -> f64 {
-        let (u, v) = (self.uniform(), self.uniform());
-        (-2.0 * u.ln()).sqrt() * (2.0 * PI * v).cos()
-    }
-}
+pub use bronchosim::rng::SplitMix64 as Rng;
 
 /// Camera → world looking along `forward` from `eye` (OpenCV axes, `down` a hint for +y).
 pub fn look(eye: [f64; 3], forward: [f64; 3], down: [f64; 3]) -> Affine {
