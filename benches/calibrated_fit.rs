@@ -6,10 +6,10 @@
 #[path = "../tests/calibrated_support/mod.rs"]
 mod calibrated_support;
 
-use bronchosim::shading::{
+use bronchosim::shading::calibrated::{
     density_weights_3d, fit_calibrated, pool_frames, CalibratedOptions, FrameData, PoolOptions,
-    WeightOptions,
 };
+use bronchosim::shading::WeightOptions;
 use calibrated_support::{render, sequence, RenderOptions};
 use criterion::{criterion_group, criterion_main, Criterion};
 use rayon::prelude::*;

@@ -11,10 +11,11 @@ use bronchosim::image::Frame;
 use bronchosim::math::Affine;
 use bronchosim::raycast::Scene;
 use bronchosim::render::{
-    render_view_with, MipOptions, MipTexture, RenderInputs, RenderOptions, ShadingMode, ViewRays,
-    ViewpointIndex,
+    render_view_with, MipOptions, MipTexture, RenderInputs, RenderOptions, ViewRays,
 };
+use bronchosim::shading::paper::PsiLookup;
 use bronchosim::shading::{CalibratedModel, ExclusionCounts, PsiModel};
+use bronchosim::shading::{FittedShading, ShadingKind};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 fn bench(c: &mut Criterion) {
@@ -59,14 +60,13 @@ fn bench(c: &mut Criterion) {
             }
         })
         .collect();
-    let index = ViewpointIndex::new(&psi);
+    let shading = FittedShading::new(ShadingKind::Paper, psi.clone(), None);
     let inputs = RenderInputs {
         scene: &scene,
         tri_uv: &tri_uv,
         texture: &texture,
-        psi: &psi,
-        index: &index,
-        calibrated: None,
+        shading: &shading,
+        kind: ShadingKind::Paper,
     };
     let camera = Camera {
         width: 320,
@@ -88,14 +88,14 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("render");
     g.sample_size(20);
     g.throughput(Throughput::Elements(1));
-    for (name, shading, ss) in [
-        ("view_320_nearest", ShadingMode::Nearest, 1),
-        ("view_320_knearest4", ShadingMode::KNearest { k: 4 }, 1),
-        ("view_320_knearest4_ss2", ShadingMode::KNearest { k: 4 }, 2),
+    for (name, psi_lookup, ss) in [
+        ("view_320_nearest", PsiLookup::Nearest, 1),
+        ("view_320_knearest4", PsiLookup::KNearest { k: 4 }, 1),
+        ("view_320_knearest4_ss2", PsiLookup::KNearest { k: 4 }, 2),
     ] {
         let rays = ViewRays::new(&camera, ss).unwrap();
         let opts = RenderOptions {
-            shading,
+            psi_lookup,
             supersample: ss,
             ..Default::default()
         };
@@ -120,8 +120,10 @@ fn bench(c: &mut Criterion) {
         rms_residual: [0.0; 3],
         samples_used: 0,
     };
+    let shading = FittedShading::new(ShadingKind::Calibrated, psi, Some(light));
     let calibrated = RenderInputs {
-        calibrated: Some(&light),
+        shading: &shading,
+        kind: ShadingKind::Calibrated,
         ..inputs
     };
     let rays = ViewRays::new(&camera, 1).unwrap();

@@ -7,15 +7,24 @@
 
 mod calibrated_support;
 
-use bronchosim::shading::calibrated_plots::{plot_gains, plot_light_profile, plot_rho};
-use bronchosim::shading::chroma_albedo::refit_with_chroma_albedo;
+use bronchosim::image::quality::{fit_gain, psnr_masked};
+use bronchosim::shading::calibrated::plots::{plot_gains, plot_light_profile, plot_rho};
+use bronchosim::shading::calibrated::{
+    density_weights_3d, fit_calibrated, pool_frames, predict_pixels, refit_with_chroma_albedo,
+    Albedo, CalibratedOptions, FrameData, PoolOptions, PooledSamples,
+};
 use bronchosim::shading::{
-    density_weights, density_weights_3d, extract_samples, fit_calibrated, fit_gain, fit_psi,
-    pool_frames, predict_pixels, psnr, Albedo, CalibratedModel, CalibratedOptions, FitOptions,
-    FrameData, PoolOptions, PooledSamples, Robust, SampleOptions, WeightOptions,
+    density_weights, extract_samples, fit_psi, CalibratedModel, FitOptions, Robust, SampleOptions,
+    WeightOptions,
 };
 use calibrated_support::{cone_profile, render, sequence, Frame, RenderOptions, View};
 use std::sync::OnceLock;
+
+/// PSNR (dB) of `k * pred` against `obs` over the masked pixels.
+fn psnr(pred: &[f32], obs: &[f32], mask: &[bool], k: f64) -> f64 {
+    let scaled: Vec<f32> = pred.iter().map(|&v| (k * f64::from(v)) as f32).collect();
+    psnr_masked(&scaled, obs, mask).unwrap_or(0.0)
+}
 
 const FRAMES: usize = 48;
 

@@ -7,18 +7,18 @@
 use std::path::Path;
 
 use bronchosim::camera::Camera;
+use bronchosim::image::quality::{psnr_masked, ssim_masked};
 use bronchosim::image::srgb::{linear_to_srgb, srgb_to_linear};
 use bronchosim::image::Frame;
 use bronchosim::math::{Affine, Point3, Vector3};
 use bronchosim::mesh::TriMesh;
 use bronchosim::raycast::{cast_frame, Scene};
-use bronchosim::render::evaluate::{psnr_masked, ssim_masked};
 use bronchosim::render::{
     evaluate_methods, flat_albedo_view, read_views, render_view, reproject_nearest_frame,
-    triangle_uvs, MaskedImage, MipOptions, MipTexture, RenderInputs, RenderOptions, ShadingMode,
-    TrainingView, ViewpointIndex,
+    triangle_uvs, MaskedImage, MipOptions, MipTexture, RenderInputs, RenderOptions, TrainingView,
 };
-use bronchosim::shading::{CalibratedModel, ExclusionCounts, PsiModel};
+use bronchosim::shading::paper::PsiLookup;
+use bronchosim::shading::{CalibratedModel, ExclusionCounts, FittedShading, PsiModel, ShadingKind};
 use bronchosim::texture::atlas::{build_atlas, rasterize_texels, AtlasOptions};
 
 /// Bend radius of the tube's centreline (mm) and tube radius (mm).
@@ -182,14 +182,13 @@ fn render_matches_brute_force_shading_times_albedo() {
         psi_at(&pose_at(0.1, 0.0), 1.0),
         psi_at(&pose_at(0.6, 0.0), 0.5),
     ];
-    let index = ViewpointIndex::new(&psi);
+    let shading = FittedShading::new(ShadingKind::Paper, psi.clone(), None);
     let inputs = RenderInputs {
         scene: &fx.scene,
         tri_uv: &fx.tri_uv,
         texture: &fx.texture,
-        psi: &psi,
-        index: &index,
-        calibrated: None,
+        shading: &shading,
+        kind: ShadingKind::Paper,
     };
     // A distorted camera: rendering takes any camera.json.
     let cam = Camera {
@@ -198,7 +197,7 @@ fn render_matches_brute_force_shading_times_albedo() {
         ..camera(128, 80.0)
     };
     let opts = RenderOptions {
-        shading: ShadingMode::Nearest,
+        psi_lookup: PsiLookup::Nearest,
         ..Default::default()
     };
     let (img, mask) = render_view(&inputs, &cam, &pose, &opts).unwrap();
@@ -238,19 +237,18 @@ fn mip_mapping_reduces_aliasing_on_distant_grazing_walls() {
     psi.c = [[0.5; 4]; 3];
     psi.d = [[1.0; 3]; 3];
     let psi = vec![psi];
-    let index = ViewpointIndex::new(&psi);
+    let shading = FittedShading::new(ShadingKind::Paper, psi.clone(), None);
     let inputs = |tex| RenderInputs {
         scene: &fx.scene,
         tri_uv: &fx.tri_uv,
         texture: tex,
-        psi: &psi,
-        index: &index,
-        calibrated: None,
+        shading: &shading,
+        kind: ShadingKind::Paper,
     };
     let cam = camera(96, 60.0);
     let pose = pose_at(0.02, -2.0);
     let o = |mipmap: bool, supersample: u32| RenderOptions {
-        shading: ShadingMode::Nearest,
+        psi_lookup: PsiLookup::Nearest,
         mipmap,
         supersample,
         gain: 1.0,
@@ -282,22 +280,21 @@ fn blending_makes_shading_continuous_while_flying() {
             )
         })
         .collect();
-    let index = ViewpointIndex::new(&psi);
+    let shading = FittedShading::new(ShadingKind::Paper, psi.clone(), None);
     let inputs = RenderInputs {
         scene: &fx.scene,
         tri_uv: &fx.tri_uv,
         texture: &fx.texture,
-        psi: &psi,
-        index: &index,
-        calibrated: None,
+        shading: &shading,
+        kind: ShadingKind::Paper,
     };
     let cam = camera(48, 30.0);
-    let mean_brightness = |shading| -> Vec<f64> {
+    let mean_brightness = |psi_lookup| -> Vec<f64> {
         (0..60)
             .map(|s| {
                 let pose = pose_at(0.25 + 0.005 * s as f32, 0.5);
                 let opts = RenderOptions {
-                    shading,
+                    psi_lookup,
                     ..Default::default()
                 };
                 let (img, mask) = render_view(&inputs, &cam, &pose, &opts).unwrap();
@@ -311,8 +308,8 @@ fn blending_makes_shading_continuous_while_flying() {
             .map(|w| (w[1] - w[0]).abs() / w[0])
             .fold(0.0, f64::max)
     };
-    let near = max_step(&mean_brightness(ShadingMode::Nearest));
-    let blend = max_step(&mean_brightness(ShadingMode::KNearest { k: 4 }));
+    let near = max_step(&mean_brightness(PsiLookup::Nearest));
+    let blend = max_step(&mean_brightness(PsiLookup::KNearest { k: 4 }));
     println!("largest relative frame-to-frame change: nearest {near:.4}, 4-nearest {blend:.4}");
     assert!(
         near > 0.2,
@@ -478,7 +475,6 @@ fn views_json_outside_the_output_folder_is_refused() {
 fn calibrated_new_views_reflect_their_own_light() {
     let fx = fixture(smooth_albedo);
     let psi = vec![psi_at(&pose_at(0.1, 0.0), 1.0)];
-    let index = ViewpointIndex::new(&psi);
     // A light with a cone and 6% / 5% / 4% inter-reflection per unit of the view's light.
     let kappa = [0.06, 0.05, 0.04];
     let light = CalibratedModel {
@@ -497,13 +493,13 @@ fn calibrated_new_views_reflect_their_own_light() {
         rms_residual: [0.0; 3],
         samples_used: 0,
     };
+    let shading = FittedShading::new(ShadingKind::Calibrated, psi, Some(light.clone()));
     let inputs = RenderInputs {
         scene: &fx.scene,
         tri_uv: &fx.tri_uv,
         texture: &fx.plain,
-        psi: &psi,
-        index: &index,
-        calibrated: Some(&light),
+        shading: &shading,
+        kind: ShadingKind::Calibrated,
     };
     let cam = camera(96, 60.0);
     let opts = RenderOptions {

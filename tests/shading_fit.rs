@@ -480,8 +480,8 @@ fn fig2_plots_are_written() {
     let dir = tempfile::tempdir().unwrap();
     let a = dir.path().join("fig2a.png");
     let b = dir.path().join("fig2b.png");
-    bronchosim::shading::plots::plot_samples_density(&s, &a).unwrap();
-    bronchosim::shading::plots::plot_psi_slices(
+    bronchosim::shading::paper::plots::plot_samples_density(&s, &a).unwrap();
+    bronchosim::shading::paper::plots::plot_psi_slices(
         &s,
         &m,
         &[(10.0, 14.0), (20.0, 24.0), (30.0, 34.0)],
@@ -505,7 +505,7 @@ fn fig2_plots_are_written() {
         );
     }
     let svg = dir.path().join("fig2b.svg");
-    bronchosim::shading::plots::plot_psi_slices(&s, &m, &[(30.0, 34.0)], &svg).unwrap();
+    bronchosim::shading::paper::plots::plot_psi_slices(&s, &m, &[(30.0, 34.0)], &svg).unwrap();
     let text = std::fs::read_to_string(&svg).unwrap();
     assert!(text.starts_with("<svg") && text.contains("30-34 mm"));
     if let Ok(out) = std::env::var("BRONCHOSIM_PLOT_DIR") {

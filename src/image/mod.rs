@@ -1,6 +1,8 @@
-//! Images in linear light: the [`Frame`] type and the sRGB transfer curve.
+//! Images in linear light: the [`Frame`] type, the sRGB transfer curve and image quality
+//! scores.
 
 pub mod frame;
+pub mod quality;
 pub mod srgb;
 
 pub use frame::Frame;

@@ -42,3 +42,10 @@ pub fn write_atomic(
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic(path, |w| w.write_all(bytes))
 }
+
+/// Write `value` as pretty JSON (with a final newline) to `path`, atomically.
+pub fn write_json_atomic<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<()> {
+    let text =
+        serde_json::to_string_pretty(value).map_err(|e| Error::invalid(path, e.to_string()))?;
+    write_bytes_atomic(path, (text + "\n").as_bytes())
+}

@@ -4,12 +4,13 @@
 
 use std::path::{Path, PathBuf};
 
-use super::manifest::{ModelManifest, ShadingFile, MODEL_FORMAT_VERSION};
+use super::manifest::{ModelManifest, MODEL_FORMAT_VERSION};
 use crate::io::glb_import::read_glb;
 use crate::io::png::{decode_png_bytes, read_png};
 use crate::mesh::TriMesh;
 use crate::raycast::Scene;
-use crate::render::{MipOptions, MipTexture, RenderInputs, ViewpointIndex};
+use crate::render::{MipOptions, MipTexture, RenderInputs};
+use crate::shading::{FittedShading, ShadingKind};
 use crate::{Error, Result};
 
 /// A built model, ready to render.
@@ -19,7 +20,7 @@ pub struct Model {
     /// model.json.
     pub manifest: ModelManifest,
     /// shading.json.
-    pub shading: ShadingFile,
+    pub shading: FittedShading,
     /// The lumen mesh with seam vertices merged (smooth normals), triangles in the GLB's order.
     pub mesh: TriMesh,
     /// UV corners of every triangle (atlas convention, [0, 1]).
@@ -30,8 +31,6 @@ pub struct Model {
     pub paper_texture: Option<MipTexture>,
     /// The mesh, ready for ray casting.
     pub scene: Scene,
-    /// Centres and directions of the fitted viewpoints.
-    pub index: ViewpointIndex,
 }
 
 /// Read and parse a JSON file of the model folder.
@@ -92,28 +91,8 @@ impl Model {
         }
         let manifest: ModelManifest = read_json(&mpath, "the model manifest")?;
         let spath = dir.join("shading.json");
-        let shading: ShadingFile = read_json(&spath, "the shading model")?;
-        if shading.viewpoints.is_empty() {
-            return Err(Error::invalid(&spath, "no fitted viewpoints"));
-        }
-        match (shading.model.as_str(), &shading.calibrated) {
-            ("paper", _) => {}
-            ("calibrated", Some(c)) => c
-                .validate()
-                .map_err(|m| Error::invalid(&spath, format!("calibrated light: {m}")))?,
-            ("calibrated", None) => {
-                return Err(Error::invalid(
-                    &spath,
-                    "model \"calibrated\" but no \"calibrated\" light",
-                ))
-            }
-            (other, _) => {
-                return Err(Error::invalid(
-                    &spath,
-                    format!("unknown shading model {other:?} (expected paper or calibrated)"),
-                ))
-            }
-        }
+        let shading: FittedShading = read_json(&spath, "the shading model")?;
+        shading.validate().map_err(|m| Error::invalid(&spath, m))?;
         let gpath = dir.join("airway.glb");
         let glb = read_glb(&gpath)?;
         let uvs = glb
@@ -161,7 +140,6 @@ impl Model {
             .collect();
         let (mesh, _) = glb.mesh.welded();
         let scene = Scene::new(&mesh)?;
-        let index = ViewpointIndex::new(&shading.viewpoints);
         Ok(Model {
             dir: dir.to_path_buf(),
             manifest,
@@ -171,15 +149,14 @@ impl Model {
             texture,
             paper_texture,
             scene,
-            index,
         })
     }
 
     /// The calibrated light when it is the model's shading.
     pub fn calibrated(&self) -> Option<&crate::shading::CalibratedModel> {
-        match self.shading.model.as_str() {
-            "calibrated" => self.shading.calibrated.as_ref(),
-            _ => None,
+        match self.shading.model {
+            ShadingKind::Calibrated => self.shading.calibrated.as_ref(),
+            ShadingKind::Paper => None,
         }
     }
 
@@ -187,7 +164,7 @@ impl Model {
     /// viewpoints and the paper's texture, also when the model's shading is calibrated.
     pub fn paper_render_inputs(&self) -> RenderInputs<'_> {
         RenderInputs {
-            calibrated: None,
+            kind: ShadingKind::Paper,
             texture: self.paper_texture.as_ref().unwrap_or(&self.texture),
             ..self.render_inputs()
         }
@@ -199,9 +176,8 @@ impl Model {
             scene: &self.scene,
             tri_uv: &self.tri_uv,
             texture: &self.texture,
-            psi: &self.shading.viewpoints,
-            index: &self.index,
-            calibrated: self.calibrated(),
+            shading: &self.shading,
+            kind: self.shading.model,
         }
     }
 }

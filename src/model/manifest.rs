@@ -4,9 +4,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::camera::Camera;
-use crate::shading::psi::PsiModel;
-use crate::shading::CalibratedModel;
-use crate::workflow::cross_validate::CrossValidation;
+use crate::shading::ShadingKind;
+
+pub use super::cross_validation::{CrossValidation, HeldOutScore, ModelCrossValidation};
 
 /// Version of the model folder layout (model.json `format_version`).
 ///
@@ -81,9 +81,8 @@ pub struct ModelManifest {
     pub colour_balance: [f32; 3],
     /// Texel edge length of the atlas on the surface (mm).
     pub texel_mm: f64,
-    /// The shading model the texture was de-lit with and new views use ("paper" or
-    /// "calibrated").
-    pub shading_model: String,
+    /// The shading model the texture was de-lit with and new views use.
+    pub shading_model: ShadingKind,
     /// The paper's texture (de-lit by each frame's Psi) when the model's shading is
     /// calibrated: the reference the report compares against.
     pub paper_texture: Option<ExtraTexture>,
@@ -175,19 +174,6 @@ pub struct ModelCounts {
     pub charts: usize,
     /// Segmented airway volume (ml).
     pub airway_volume_ml: f64,
-}
-
-/// shading.json: both shading models; `model` names the one the texture was de-lit with and
-/// new views use.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ShadingFile {
-    /// "paper" (one Psi per viewpoint, Chung et al. 2004, eq. 2–5) or "calibrated".
-    pub model: String,
-    /// The paper's fitted viewpoints, in frame order (always fitted: the reference).
-    pub viewpoints: Vec<PsiModel>,
-    /// The calibrated light of the whole video (gains in frame order), when fitted.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub calibrated: Option<CalibratedModel>,
 }
 
 /// `to` relative to the folder `from` ("../case"), when both are absolute and share a first

@@ -1,8 +1,9 @@
 //! The model folder (DESIGN.md "Output: the model folder"): its manifest and shading types,
 //! and loading a built model back for rendering.
 
+pub mod cross_validation;
 pub mod load;
 pub mod manifest;
 
 pub use load::Model;
-pub use manifest::{ModelManifest, ShadingFile, MODEL_FORMAT_VERSION};
+pub use manifest::{ModelManifest, MODEL_FORMAT_VERSION};

@@ -20,6 +20,7 @@ use super::truth_mesh::{mask_truth_mesh, tree_truth_mesh};
 use crate::camera::Camera;
 use crate::camera::Pose;
 use crate::image::Frame;
+use crate::io::atomic::write_json_atomic;
 use crate::io::camera_file::write_camera_json;
 use crate::io::mesh_export::write_ply;
 use crate::io::nifti::write_nifti;
@@ -305,7 +306,7 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
         reference_gain,
         frames: gains,
     };
-    write_json(&truth.join("gains.json"), &gfile)?;
+    write_json_atomic(&truth.join("gains.json"), &gfile)?;
     let pinhole = camera.pinhole();
     write_camera_json(&truth.join("camera.json"), &pinhole)?;
     let vrays = SubpixelRays::new(&pinhole, opts.supersample);
@@ -358,7 +359,7 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
         },
         "mesh": { "vertices": sm.mesh_vertices, "triangles": sm.mesh_triangles },
     });
-    write_json(&truth.join("truth.json"), &manifest)?;
+    write_json_atomic(&truth.join("truth.json"), &manifest)?;
     Ok(sm)
 }
 
@@ -420,10 +421,4 @@ pub fn frame_stats(f: &Frame) -> (f64, f64) {
         }
     }
     (mean / n, sat as f64 / n)
-}
-
-fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
-    let text =
-        serde_json::to_string_pretty(value).map_err(|e| Error::invalid(path, e.to_string()))?;
-    std::fs::write(path, text + "\n").map_err(|e| Error::io(path, e))
 }

@@ -8,12 +8,12 @@
 
 use rayon::prelude::*;
 
-use super::shading_lookup::ViewpointIndex;
 use crate::camera::pose::rigid_inverse;
 use crate::camera::Camera;
 use crate::image::Frame;
 use crate::math::{transform_point, Affine, Point3};
 use crate::raycast::{cast_frame, cast_frame_with, GBuffer, RayTable, Scene};
+use crate::shading::paper::ViewpointIndex;
 use crate::{Error, Result};
 
 /// One training frame: the image as recorded (linear RGB, lens distortion kept) and its pose.

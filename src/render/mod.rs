@@ -8,15 +8,13 @@
 pub mod baselines;
 pub mod evaluate;
 mod novel_view;
-pub mod shading_lookup;
 pub mod texture_sampler;
 pub mod views_io;
 
 pub use baselines::{flat_albedo_view, reproject_nearest_frame, TrainingView};
-pub use evaluate::{evaluate_methods, fit_gains, MaskedImage, MethodScore, ViewScore};
+pub use evaluate::{evaluate_methods, MaskedImage, MethodScore, ViewScore};
 pub use novel_view::{
     render_view, render_view_with, triangle_uvs, RenderInputs, RenderOptions, ViewRays,
 };
-pub use shading_lookup::{BlendedPsi, ShadingMode, ViewShader, ViewpointIndex};
 pub use texture_sampler::{MipOptions, MipTexture};
 pub use views_io::{evaluate_folders, read_views, render_views, View};

@@ -1,17 +1,16 @@
 //! Rendering a new view (paper §2.4): ray cast the mesh from the new viewpoint, shade with the
-//! fitted Psi evaluated at the new view's gamma and z, multiply by the fused albedo texture.
+//! fitted shading evaluated at the new view's gamma, z and theta (the light moves with the
+//! camera), multiply by the fused albedo texture.
 
 use rayon::prelude::*;
 
-use super::shading_lookup::{ShadingMode, ViewShader, ViewpointIndex};
 use super::texture_sampler::MipTexture;
 use crate::camera::Camera;
 use crate::image::Frame;
 use crate::math::Affine;
 use crate::raycast::Scene;
-use crate::shading::frame_shading::LUMA;
-use crate::shading::psi::PsiModel;
-use crate::shading::CalibratedModel;
+use crate::shading::paper::PsiLookup;
+use crate::shading::{FittedShading, ShadingKind};
 use crate::texture::atlas::Atlas;
 use crate::{Error, Result};
 
@@ -26,12 +25,10 @@ pub struct RenderInputs<'a> {
     pub tri_uv: &'a [[[f32; 2]; 3]],
     /// The fused albedo with its mip chain.
     pub texture: &'a MipTexture,
-    /// The fitted shading of every training viewpoint.
-    pub psi: &'a [PsiModel],
-    /// Centres and directions of `psi` (build once with [`ViewpointIndex::new`]).
-    pub index: &'a ViewpointIndex,
-    /// The calibrated light model; when given it shades the view instead of `psi`.
-    pub calibrated: Option<&'a CalibratedModel>,
+    /// The fitted shading models.
+    pub shading: &'a FittedShading,
+    /// Which of them shades the view.
+    pub kind: ShadingKind,
 }
 
 /// UV corners of every triangle of an atlas (input to [`RenderInputs::tri_uv`]).
@@ -45,17 +42,17 @@ pub fn triangle_uvs(atlas: &Atlas) -> Vec<[[f32; 2]; 3]> {
 }
 
 /// Options of [`render_view`]. Steps per pixel: cast `supersample²` rays (stratified in the
-/// pixel), shade each hit with Psi (`shading`) × texture (trilinear, level from the ray's
+/// pixel), shade each hit (the model `RenderInputs::kind`) × texture (trilinear, level from the ray's
 /// footprint on the surface), average the hits, multiply by `gain`.
 #[derive(Clone, Debug)]
 pub struct RenderOptions {
-    /// Which fitted Psi shade the view.
-    pub shading: ShadingMode,
+    /// Which fitted viewpoints' Psi shade the view (the paper's model only).
+    pub psi_lookup: PsiLookup,
     /// Rays per pixel along each axis (1 = one ray through the pixel centre).
     pub supersample: u32,
     /// Choose the texture level from the footprint (false = bilinear on level 0 only).
     pub mipmap: bool,
-    /// Exposure: output = gain × Psi × albedo (linear).
+    /// Exposure: output = gain × shading × albedo (linear).
     pub gain: f32,
     /// Write the texture alone (the relative albedo the shading multiplies), unshaded.
     pub albedo_only: bool,
@@ -64,7 +61,7 @@ pub struct RenderOptions {
 impl Default for RenderOptions {
     fn default() -> Self {
         RenderOptions {
-            shading: ShadingMode::default(),
+            psi_lookup: PsiLookup::default(),
             supersample: 1,
             mipmap: true,
             gain: 1.0,
@@ -164,20 +161,10 @@ pub fn render_view_with(
             inputs.scene.triangle_count()
         )));
     }
-    if inputs.psi.is_empty() || inputs.index.len() != inputs.psi.len() {
-        return Err(Error::Other(format!(
-            "render: {} shading models and an index of {} viewpoints (need at least one of each, equal)",
-            inputs.psi.len(),
-            inputs.index.len()
-        )));
-    }
-    let shade = ViewShader::new(
-        inputs.psi,
-        inputs.index,
-        inputs.calibrated,
-        camera_to_world,
-        opts.shading,
-    );
+    let shade = inputs
+        .shading
+        .view_shader(inputs.kind, camera_to_world, opts.psi_lookup)
+        .map_err(|e| Error::Other(format!("render: {e}")))?;
     let m = camera_to_world;
     let org = [m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32];
     let rot: [[f32; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)] as f32));
@@ -259,39 +246,7 @@ pub fn render_view_with(
             },
         );
     if !opts.albedo_only {
-        if let ViewShader::Calibrated { model, .. } = &shade {
-            add_interreflection(model, &mut frame, &mask, opts.gain);
-        }
+        shade.finish(&mut frame, &mask, opts.gain);
     }
     Ok((frame, mask))
-}
-
-/// Add the calibrated light's inter-reflection for this view (`kappa_c` times the view's own
-/// mean luminance over its surface pixels; nothing when the model has no such term) to every
-/// pixel that sees the surface. `gain` is the gain the frame was rendered at.
-fn add_interreflection(model: &CalibratedModel, frame: &mut Frame, mask: &[bool], gain: f32) {
-    if model.interreflection.is_none() || gain <= 0.0 {
-        return;
-    }
-    let (sum, hits) = frame
-        .rgb
-        .chunks_exact(3)
-        .zip(mask)
-        .filter(|(_, &m)| m)
-        .fold((0.0f64, 0usize), |(s, n), (px, _)| {
-            let lum: f64 = (0..3).map(|c| LUMA[c] * f64::from(px[c])).sum();
-            (s + lum, n + 1)
-        });
-    if hits == 0 {
-        return;
-    }
-    let light_without = sum / hits as f64 / f64::from(gain);
-    let extra = model
-        .view_interreflection(light_without)
-        .map(|a| (a * f64::from(gain)) as f32);
-    for (px, _) in frame.rgb.chunks_exact_mut(3).zip(mask).filter(|(_, &m)| m) {
-        for c in 0..3 {
-            px[c] += extra[c];
-        }
-    }
 }

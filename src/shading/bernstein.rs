@@ -1,4 +1,5 @@
-//! Bernstein polynomials `B_i^n(t) = C(n,i) (1-t)^(n-i) t^i` (paper, eq. 2), the basis of Psi.
+//! Bernstein polynomials `B_i^n(t) = C(n,i) (1-t)^(n-i) t^i` (paper, eq. 2): the basis of the
+//! paper's Psi (cubic) and of the calibrated light's rho and s (any degree).
 
 /// `B_i^n(t)` for any degree `n` and `0 <= i <= n` (0 when `i > n`). `t` is unitless.
 pub fn bernstein(n: u32, i: u32, t: f64) -> f64 {
@@ -36,6 +37,44 @@ pub fn basis3_into(ts: &[f64], out: &mut [[f64; 4]]) {
     }
 }
 
+/// The Bernstein basis `B_i^n(t)`, `i = 0..=n`, of degree `n = out.len() - 1`, written into `out`.
+#[inline]
+pub fn basis_into(t: f64, out: &mut [f64]) {
+    let n = out.len() - 1;
+    let s = 1.0 - t;
+    let mut tp = 1.0;
+    for o in out.iter_mut() {
+        *o = tp;
+        tp *= t;
+    }
+    let mut sp = 1.0;
+    for o in out.iter_mut().rev() {
+        *o *= sp;
+        sp *= s;
+    }
+    let mut binom = 1.0;
+    for (i, o) in out.iter_mut().enumerate() {
+        *o *= binom;
+        binom = binom * (n - i) as f64 / (i + 1) as f64;
+    }
+}
+
+/// `sum_i coeffs[i] B_i^n(t)` with `n = coeffs.len() - 1` (de Casteljau: stable, allocation free
+/// for degrees up to 15).
+#[inline]
+pub fn bernstein_eval(coeffs: &[f64], t: f64) -> f64 {
+    let n = coeffs.len();
+    debug_assert!((1..=16).contains(&n));
+    let mut b = [0.0f64; 16];
+    b[..n].copy_from_slice(coeffs);
+    for k in (1..n).rev() {
+        for i in 0..k {
+            b[i] = b[i] * (1.0 - t) + b[i + 1] * t;
+        }
+    }
+    b[0]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -62,6 +101,25 @@ mod tests {
         for k in 0..=10 {
             let t = f64::from(k) / 10.0;
             assert!((eval3(&c, t) - t).abs() < 1e-14);
+        }
+    }
+
+    #[test]
+    fn general_basis_matches_formula_and_eval() {
+        for n in 0..7usize {
+            let mut b = vec![0.0; n + 1];
+            let coeffs: Vec<f64> = (0..=n).map(|i| 0.3 + 0.1 * i as f64).collect();
+            for k in 0..=10 {
+                let t = f64::from(k) / 10.0;
+                basis_into(t, &mut b);
+                let mut direct = 0.0;
+                for i in 0..=n {
+                    let e = bernstein(n as u32, i as u32, t);
+                    assert!((b[i] - e).abs() < 1e-14, "n {n} i {i} t {t}");
+                    direct += coeffs[i] * e;
+                }
+                assert!((bernstein_eval(&coeffs, t) - direct).abs() < 1e-14);
+            }
         }
     }
 }

@@ -6,7 +6,7 @@
 //!   whole video (DESIGN.md "Beyond the paper").
 
 use super::calibrated::CalibratedModel;
-use super::psi::PsiModel;
+use super::paper::PsiModel;
 
 /// Luminance weights (Rec. 709) that turn an RGB shading into one weight.
 pub const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
@@ -109,6 +109,25 @@ impl FrameShading<'_> {
             }
         }
         best
+    }
+}
+
+/// Anything that gives each training frame its shading: the paper's Psi per frame, or the
+/// calibrated light at each frame's gain. De-lighting and fusion stream frames through it.
+pub trait FrameShaders: Sync {
+    /// The shading of frame `frame` (poses order).
+    fn frame_shading(&self, frame: usize) -> FrameShading<'_>;
+}
+
+impl FrameShaders for Vec<PsiModel> {
+    fn frame_shading(&self, frame: usize) -> FrameShading<'_> {
+        FrameShading::Paper(&self[frame])
+    }
+}
+
+impl FrameShaders for CalibratedModel {
+    fn frame_shading(&self, frame: usize) -> FrameShading<'_> {
+        FrameShading::Calibrated { model: self, frame }
     }
 }
 

@@ -1,41 +1,42 @@
-//! The paper's shading model Psi (Chung et al. 2004, §2.2–2.3) and its weighted fit.
+//! Shading: how the bronchoscope's light makes each pixel's brightness from the surface's
+//! albedo, and its fit to the video.
 //!
-//! Per frame: [`extract_samples`] keeps the pixels that obey the model, [`density_weights`]
-//! weighs them inversely to their density in (gamma, z), [`fit_psi`] fits
-//! `Psi(gamma, z) = rho(gamma) * varrho(z)` per channel, giving a [`PsiModel`] (serialised in
-//! `shading.json`). [`plots`] draws the paper's Fig. 2.
+//! Two models, named by [`ShadingKind`]:
+//! - [`paper`]: the paper's Psi (Chung et al. 2004, §2.2–2.3), one per viewpoint;
+//! - [`calibrated`]: one calibrated light for the whole video (DESIGN.md, "Beyond the paper").
 //!
-//! Beyond the paper, [`calibrated`]: one light model for the whole video (rho(gamma), the
-//! light's angular profile s(theta), absolute 1/z², a gain per frame), fitted on samples pooled
-//! over all frames by [`fit_calibrated`] (and refitted with a known albedo by
-//! [`fit_calibrated_with_albedo`]); [`calibrated_plots`] draws it.
+//! Both are fitted to the pixels that obey a shading model ([`samples`]), weighted inversely
+//! to their density ([`density`]), by small exact solves ([`solve`]) under a robust loss
+//! ([`robust`]), in a [`bernstein`] basis. The fitted models of a video are one
+//! [`FittedShading`] (shading.json), which gives the shader of each training frame
+//! ([`FrameShading`], what de-lighting divides by) and of each new view ([`ViewShader`], what
+//! rendering multiplies by).
+//!
+//! Adding a shading model: a variant of [`ShadingKind`]; a folder beside `paper/` and
+//! `calibrated/` with its model type and fit; a field of [`FittedShading`] and its arms in
+//! `has`, `frame_shaders` and `view_shader`; a variant of [`FrameShading`] and of
+//! [`ViewShader`] (their `match`es tell the compiler what is left); and its fit as a stage of
+//! the build (`workflow::build`). Cross-validation, the manifest and the report then list it.
 
 pub mod bernstein;
 pub mod calibrated;
-pub mod calibrated_fit;
-mod calibrated_moments;
-pub mod calibrated_plots;
-pub mod calibrated_predict;
-pub mod calibrated_samples;
-pub mod chroma_albedo;
-pub mod fit;
+pub mod density;
+pub mod fitted;
 pub mod frame_shading;
-mod moments;
-pub mod plots;
-pub mod psi;
+pub mod kind;
+pub mod paper;
+pub mod plotting;
+pub mod robust;
 pub mod samples;
-pub mod weights;
+pub mod solve;
+pub mod view_shading;
 
 pub use calibrated::CalibratedModel;
-pub use calibrated_fit::{
-    fit_calibrated, fit_calibrated_with_albedo, CalibratedFit, CalibratedOptions, CalibratedReport,
-};
-pub use calibrated_predict::{cos_theta_of, fit_gain, predict_frame, predict_pixels, psnr, Albedo};
-pub use calibrated_samples::{
-    density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples,
-};
-pub use fit::{fit_psi, ChannelFit, FitOptions, PsiFit, Robust};
-pub use frame_shading::{FrameShading, Shade};
-pub use psi::PsiModel;
+pub use density::{density_weights, density_weights_nd, DensityWeights, WeightOptions};
+pub use fitted::FittedShading;
+pub use frame_shading::{FrameShaders, FrameShading, Shade, LUMA};
+pub use kind::ShadingKind;
+pub use paper::{fit_psi, FitOptions, PsiModel};
+pub use robust::Robust;
 pub use samples::{extract_samples, ExclusionCounts, SampleOptions, SampleSet};
-pub use weights::{density_weights, DensityWeights, WeightOptions};
+pub use view_shading::ViewShader;

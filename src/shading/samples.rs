@@ -61,6 +61,17 @@ impl ExclusionCounts {
     }
 }
 
+impl std::fmt::Display for ExclusionCounts {
+    /// "102400 miss the mesh, 0 grazing, 0 saturated, 0 dark".
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} miss the mesh, {} grazing, {} saturated, {} dark",
+            self.no_hit, self.grazing, self.saturated, self.dark
+        )
+    }
+}
+
 /// The samples of one frame, struct of arrays (index i is one pixel that obeys the model).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SampleSet {

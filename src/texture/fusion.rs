@@ -45,7 +45,32 @@ pub enum FusionMethod {
     },
 }
 
+/// The fusion methods by name (the command line's `--fusion`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FusionKind {
+    /// [`FusionMethod::WeightedAverage`].
+    Average,
+    /// The paper's max-weight choice, [`FusionMethod::MaxWeightSmoothed`].
+    Max,
+}
+
+/// Default power of the predicted intensity in the weighted average (inverse-variance weights).
+pub const DEFAULT_WEIGHT_EXPONENT: f32 = 2.0;
+
+/// Default smoothing of the max-weight maps (texels).
+pub const DEFAULT_SIGMA_TEXELS: f32 = 2.0;
+
 impl FusionMethod {
+    /// The method `kind`; `weight_exponent` (1 or more) is the weighted average's.
+    pub fn of_kind(kind: FusionKind, weight_exponent: f32) -> FusionMethod {
+        match kind {
+            FusionKind::Average => FusionMethod::WeightedAverage { weight_exponent },
+            FusionKind::Max => FusionMethod::MaxWeightSmoothed {
+                sigma_texels: DEFAULT_SIGMA_TEXELS,
+            },
+        }
+    }
+
     /// Streaming passes over the frames [`fuse`] makes with this method.
     pub fn passes(&self) -> usize {
         match self {
@@ -69,7 +94,9 @@ pub struct FusionOptions {
 impl Default for FusionOptions {
     fn default() -> Self {
         FusionOptions {
-            method: FusionMethod::MaxWeightSmoothed { sigma_texels: 2.0 },
+            method: FusionMethod::MaxWeightSmoothed {
+                sigma_texels: DEFAULT_SIGMA_TEXELS,
+            },
             delight: DelightOptions::default(),
         }
     }

@@ -24,7 +24,8 @@ use crate::io::poses::{write_poses, FrameRef, PoseEntry};
 use crate::math::{Affine, Point3, Vector3};
 use crate::model::Model;
 use crate::phantom::path::{look_pose, SmoothPath};
-use crate::render::{render_view_with, RenderOptions, ShadingMode, ViewRays};
+use crate::render::{render_view_with, RenderOptions, ViewRays};
+use crate::shading::paper::PsiLookup;
 use crate::volume::geodesic::{centred_path, inside_distance};
 use crate::volume::Volume;
 use crate::workflow::progress::Progress;
@@ -39,8 +40,8 @@ pub struct FlythroughOptions {
     pub fps: u32,
     /// The camera to render with (default: the model's training camera).
     pub camera: Option<Camera>,
-    /// How the fitted shading models are chosen (default: k-nearest blending, no jumps).
-    pub shading: ShadingMode,
+    /// How the paper's fitted viewpoints are chosen (default: k-nearest blending, no jumps).
+    pub psi_lookup: PsiLookup,
     /// Arc step of the resampled centre line (mm).
     pub step_mm: f64,
     /// Gaussian smoothing of the centre line (mm, standard deviation along the arc).
@@ -61,7 +62,7 @@ impl Default for FlythroughOptions {
             frames: 120,
             fps: 25,
             camera: None,
-            shading: ShadingMode::default(),
+            psi_lookup: PsiLookup::default(),
             step_mm: 0.5,
             smoothing_mm: 3.0,
             look_ahead_mm: 8.0,
@@ -120,7 +121,7 @@ pub fn flythrough(
     let camera = opts.camera.unwrap_or(model.manifest.camera);
     let rays = ViewRays::new(&camera, 1)?;
     let ropts = RenderOptions {
-        shading: opts.shading,
+        psi_lookup: opts.psi_lookup,
         ..Default::default()
     };
     let inputs = model.render_inputs();

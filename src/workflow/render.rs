@@ -10,7 +10,8 @@ use crate::camera::Camera;
 use crate::io::camera_file::read_camera;
 use crate::io::output_dir::OutputDir;
 use crate::model::Model;
-use crate::render::{render_views, RenderOptions, ShadingMode};
+use crate::render::{render_views, RenderOptions};
+use crate::shading::ShadingKind;
 use crate::Result;
 
 /// Options of [`render_command`].
@@ -44,14 +45,6 @@ pub struct RenderSummary {
     pub load_seconds: f64,
     /// Seconds to render and write every view.
     pub render_seconds: f64,
-}
-
-/// A readable name of a shading mode.
-pub fn shading_mode_name(mode: ShadingMode) -> String {
-    match mode {
-        ShadingMode::Nearest => "nearest".into(),
-        ShadingMode::KNearest { k } => format!("k-nearest (k = {k})"),
-    }
 }
 
 /// Render every view of `views_json` from the model in `model_dir` into `out`: per view the
@@ -93,15 +86,15 @@ pub fn render_command(
         views: views_json.display().to_string(),
         camera_source,
         camera,
-        shading: match model.calibrated() {
-            Some(_) => "calibrated light".into(),
-            None => shading_mode_name(opts.render.shading),
+        shading: match model.shading.model {
+            ShadingKind::Calibrated => "calibrated light".into(),
+            ShadingKind::Paper => opts.render.psi_lookup.to_string(),
         },
         images,
         load_seconds,
         render_seconds,
     };
-    crate::workflow::build::write_json(&dir.join("render.json"), &summary)?;
+    crate::io::atomic::write_json_atomic(&dir.join("render.json"), &summary)?;
     dir.commit()?;
     Ok(summary)
 }

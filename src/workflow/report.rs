@@ -7,13 +7,11 @@ use crate::image::Frame;
 use crate::io::png::write_png_srgb8;
 use crate::model::ModelManifest;
 use crate::raycast::{GBuffer, RayTable};
-use crate::shading::calibrated_plots::{plot_gains, plot_light_profile, plot_rho};
-use crate::shading::calibrated_predict::cos_theta_of;
-use crate::shading::frame_shading::FrameShading;
-use crate::shading::plots::{plot_psi_slices, plot_samples_density};
-use crate::shading::psi::PsiModel;
-use crate::shading::samples::SampleSet;
-use crate::shading::CalibratedModel;
+use crate::shading::calibrated::plots::{plot_gains, plot_light_profile, plot_rho};
+use crate::shading::calibrated::{cos_theta_of, CalibratedModel};
+use crate::shading::paper::plots::{plot_psi_slices, plot_samples_density};
+use crate::shading::paper::PsiModel;
+use crate::shading::{FittedShading, FrameShading, SampleSet};
 use crate::workflow::new_views_figure::NewViewsFigure;
 use crate::{Error, Result};
 use base64::Engine;
@@ -44,8 +42,8 @@ pub struct ReportInputs<'a> {
     pub albedo_png: &'a [u8],
     /// New views (paper Fig. 4), with scores when reference views were given.
     pub new_views: Option<&'a NewViewsFigure>,
-    /// The calibrated light of the whole video, when fitted.
-    pub calibrated: Option<&'a CalibratedModel>,
+    /// The fitted shading models and the one in use.
+    pub shading: &'a FittedShading,
 }
 
 fn img_tag(png: &[u8], alt: &str, width: Option<u32>) -> String {
@@ -201,7 +199,7 @@ fn shading_section(
             .zip(colours)
             .map(|(mc, c)| {
                 (
-                    mc.model.as_str(),
+                    mc.model.name(),
                     c,
                     mc.frames.iter().map(|f| f.psnr_db.unwrap_or(0.0)).collect(),
                 )
@@ -305,7 +303,7 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
         m.counts.chart_texels,
         100.0 * m.counts.covered_texels as f64 / m.counts.chart_texels.max(1) as f64
     );
-    shading_section(&mut html, m, inputs.calibrated, tmp.path())?;
+    shading_section(&mut html, m, inputs.shading.calibrated.as_ref(), tmp.path())?;
     // Fit quality over the video.
     html.push_str("<h2>Fit quality of Psi over the video</h2>");
     let r2 = |c: usize| m.fit_quality.iter().map(|f| f.r2[c]).collect::<Vec<_>>();
@@ -337,13 +335,11 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
         let fit = tmp.path().join(format!("fit{}.png", f.index));
         plot_psi_slices(&f.samples, &f.psi, &slices, &fit)?;
         let read = |p: &Path| std::fs::read(p).map_err(|e| Error::io(p, e));
-        let shading = match inputs.calibrated {
-            Some(model) if m.shading_model == "calibrated" => FrameShading::Calibrated {
-                model,
-                frame: f.index,
-            },
-            _ => FrameShading::Paper(&f.psi),
-        };
+        let shading = inputs
+            .shading
+            .frame_shaders(m.shading_model)
+            .map_err(Error::Other)?
+            .frame_shading(f.index);
         let (shade, tex) = shading_and_texture(f, shading, &cos_theta);
         let name = match shading {
             FrameShading::Paper(_) => "Psi(gamma, z)",

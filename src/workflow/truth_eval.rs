@@ -15,8 +15,9 @@ use crate::model::Model;
 use crate::render::views_io::load_truth;
 use crate::render::{
     evaluate_methods, flat_albedo_view, render_view_with, reproject_nearest_frame, MaskedImage,
-    MethodScore, RenderInputs, RenderOptions, ShadingMode, TrainingView, ViewRays, ViewpointIndex,
+    MethodScore, RenderInputs, RenderOptions, TrainingView, ViewRays,
 };
+use crate::shading::paper::{PsiLookup, ViewpointIndex};
 use crate::{Error, Result};
 
 /// Method names as they appear in tables and the report. The calibrated light (when it is the
@@ -65,9 +66,9 @@ pub fn evaluate_against_truth(
     let camera = truth_camera(truth_dir)?;
     let names: Vec<String> = views.iter().map(|v| v.name.clone()).collect();
     let rays = ViewRays::new(&camera, 1)?;
-    let render = |inputs: &RenderInputs, mode: ShadingMode| -> Result<Vec<MaskedImage>> {
+    let render = |inputs: &RenderInputs, lookup: PsiLookup| -> Result<Vec<MaskedImage>> {
         let opts = RenderOptions {
-            shading: mode,
+            psi_lookup: lookup,
             ..Default::default()
         };
         views
@@ -79,10 +80,10 @@ pub fn evaluate_against_truth(
             .collect()
     };
     let paper = model.paper_render_inputs();
-    let nearest = render(&paper, ShadingMode::Nearest)?;
-    let blended = render(&paper, ShadingMode::default())?;
+    let nearest = render(&paper, PsiLookup::Nearest)?;
+    let blended = render(&paper, PsiLookup::default())?;
     let calibrated = match model.calibrated() {
-        Some(_) => Some(render(&model.render_inputs(), ShadingMode::default())?),
+        Some(_) => Some(render(&model.render_inputs(), PsiLookup::default())?),
         None => None,
     };
 

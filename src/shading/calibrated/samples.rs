@@ -7,10 +7,10 @@
 // `!(x > t)` on floats is deliberate: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use super::frame_shading::LUMA;
-use super::samples::{ExclusionCounts, SampleOptions};
-use super::weights::WeightOptions;
 use crate::rng::splitmix64;
+use crate::shading::density::{density_weights_nd, WeightOptions};
+use crate::shading::frame_shading::LUMA;
+use crate::shading::samples::{ExclusionCounts, SampleOptions};
 use crate::{Error, Result};
 use rayon::prelude::*;
 
@@ -296,11 +296,6 @@ pub fn density_weights_3d(samples: &PooledSamples, opts: &WeightOptions) -> Vec<
     if n == 0 {
         return Vec::new();
     }
-    let per_axis = (n as f64 / opts.target_per_bin.max(1.0)).cbrt().round() as usize;
-    let nb = per_axis.clamp(
-        opts.min_bins.max(1),
-        opts.max_bins.max(opts.min_bins.max(1)),
-    );
     let (g_lo, g_hi) = samples
         .gamma
         .iter()
@@ -325,26 +320,18 @@ pub fn density_weights_3d(samples: &PooledSamples, opts: &WeightOptions) -> Vec<
         span(f64::from(z_lo), f64::from(z_hi)),
         span(0.0, 1.0 - c_lo),
     );
-    let bin = |x: f64| ((x * nb as f64).max(0.0) as usize).min(nb - 1);
-    let bins: Vec<u32> = (0..n)
-        .into_par_iter()
-        .with_min_len(8192)
-        .map(|i| {
-            let a = bin(f64::from(samples.gamma[i] - g_lo) / gs);
-            let b = bin(f64::from(samples.z[i] - z_lo) / zsn);
-            let c = bin((1.0 - f64::from(samples.cos_theta[i])) / ts);
-            ((a * nb + b) * nb + c) as u32
-        })
-        .collect();
-    let mut counts = vec![0u32; nb * nb * nb];
-    for &b in &bins {
-        counts[b as usize] += 1;
-    }
-    let occupied = counts.iter().filter(|&&c| c > 0).count();
-    let scale = n as f64 / occupied as f64;
-    bins.iter()
-        .map(|&b| (scale / f64::from(counts[b as usize])) as f32)
-        .collect()
+    density_weights_nd(
+        n,
+        |i| {
+            [
+                f64::from(samples.gamma[i] - g_lo) / gs,
+                f64::from(samples.z[i] - z_lo) / zsn,
+                (1.0 - f64::from(samples.cos_theta[i])) / ts,
+            ]
+        },
+        opts,
+    )
+    .weights
 }
 
 #[cfg(test)]

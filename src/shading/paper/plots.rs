@@ -8,24 +8,12 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::psi::PsiModel;
-use super::samples::SampleSet;
+use crate::shading::plotting::{render, CURVE_RGB, FONT_NAME};
+use crate::shading::samples::SampleSet;
 use crate::{Error, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
-use std::sync::Once;
-
-/// Embedded so plots need no system fonts (DejaVu Sans, see assets/DejaVuSans-LICENSE).
-static FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
-pub(crate) const FONT_NAME: &str = "sans-serif";
-
-pub(crate) fn register_font() {
-    static ONCE: Once = Once::new();
-    ONCE.call_once(|| {
-        // The embedded font is known good; a failure would only lose text, not the plot.
-        let _ = plotters::style::register_font(FONT_NAME, FontStyle::Normal, FONT);
-    });
-}
 
 /// Channel colours for points (light) and curves (dark).
 const POINT_RGB: [RGBColor; 3] = [
@@ -33,45 +21,12 @@ const POINT_RGB: [RGBColor; 3] = [
     RGBColor(40, 170, 60),
     RGBColor(50, 90, 230),
 ];
-pub(crate) const CURVE_RGB: [RGBColor; 3] = [
-    RGBColor(120, 0, 0),
-    RGBColor(0, 90, 10),
-    RGBColor(0, 20, 120),
-];
 
 /// At most `max` evenly strided indices of `0..n` (keeps plots light without random sampling).
 fn stride(n: usize, max: usize) -> impl Iterator<Item = usize> {
     let step = n.div_ceil(max.max(1)).max(1);
     (0..n).step_by(step)
 }
-
-/// Draw with `$draw(root)` on an SVG or a PNG backend, chosen by the path's extension.
-macro_rules! render {
-    ($path:expr, $size:expr, $draw:expr) => {{
-        $crate::shading::plots::register_font();
-        let path: &std::path::Path = $path;
-        let size: (u32, u32) = $size;
-        let plot_err = |e: String| Error::Other(format!("{}: plot failed: {e}", path.display()));
-        if path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("svg"))
-        {
-            let root = SVGBackend::new(path, size).into_drawing_area();
-            $draw(&root).map_err(|e| plot_err(e.to_string()))?;
-            root.present().map_err(|e| plot_err(e.to_string()))?;
-            Ok(())
-        } else {
-            let mut buf = vec![0u8; size.0 as usize * size.1 as usize * 3];
-            {
-                let root = BitMapBackend::with_buffer(&mut buf, size).into_drawing_area();
-                $draw(&root).map_err(|e| plot_err(e.to_string()))?;
-                root.present().map_err(|e| plot_err(e.to_string()))?;
-            }
-            $crate::shading::plots::write_png(path, size, &buf)
-        }
-    }};
-}
-pub(crate) use render;
 
 /// Fig. 2a: every sample as a faint dot at (gamma, z mm), so overlapping dots show density.
 pub fn plot_samples_density(samples: &SampleSet, path: &Path) -> Result<()> {
@@ -198,17 +153,4 @@ fn draw_slices<DB: DrawingBackend>(
         }
     }
     Ok(())
-}
-
-pub(crate) fn write_png(path: &Path, size: (u32, u32), rgb: &[u8]) -> Result<()> {
-    let file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), size.0, size.1);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    let to_err = |e: png::EncodingError| {
-        Error::Other(format!("{}: PNG encoding failed: {e}", path.display()))
-    };
-    let mut writer = enc.write_header().map_err(to_err)?;
-    writer.write_image_data(rgb).map_err(to_err)?;
-    writer.finish().map_err(to_err)
 }

@@ -11,8 +11,8 @@
 // Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
 #![allow(clippy::needless_range_loop)]
 
-use super::calibrated::basis_into;
-use super::calibrated_samples::PooledSamples;
+use super::samples::PooledSamples;
+use crate::shading::bernstein::basis_into;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 

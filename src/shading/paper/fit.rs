@@ -17,27 +17,16 @@
 // `!(x > t)` on floats is deliberate: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use super::bernstein::eval3;
-use super::moments::{accumulate, solve_box, solve_spd, Quadratic};
+use super::moments::{accumulate, Quadratic};
 use super::psi::PsiModel;
-use super::samples::SampleSet;
+use crate::shading::bernstein::eval3;
+use crate::shading::robust::Robust;
+use crate::shading::samples::SampleSet;
+use crate::shading::solve::{solve_box_fixed, solve_spd};
 use crate::{Error, Result};
 use nalgebra::SVector;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-
-/// Robust loss applied on top of the density weights (IRLS).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub enum Robust {
-    /// Plain weighted least squares (the paper).
-    None,
-    /// Huber: residuals beyond `k` robust standard deviations get weight `k / |t|`. 1.345 is
-    /// the usual choice (95% efficiency under Gaussian noise).
-    Huber(f64),
-    /// Tukey's biweight: residuals beyond `c` robust standard deviations get weight 0.
-    /// 4.685 is the usual choice (95% efficiency under Gaussian noise).
-    Tukey(f64),
-}
 
 /// Options of [`fit_psi`].
 #[derive(Debug, Clone, PartialEq)]
@@ -247,11 +236,9 @@ fn fit_channel(
     let bounds = (scale * 1e-6, 1e-6);
     let start = [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0];
     let mut p = solve_quadratic(quad, start, opts, constrained.then_some(bounds), rep);
-    let tuning = match opts.robust {
-        Robust::None => return p,
-        Robust::Huber(k) => (false, k),
-        Robust::Tukey(c) => (true, c),
-    };
+    if opts.robust == Robust::None {
+        return p;
+    }
     let n = values.len();
     for _ in 0..opts.max_irls_iterations {
         rep.irls_iterations += 1;
@@ -266,22 +253,7 @@ fn fit_channel(
         let mid = n / 2;
         let (_, med, _) = abs.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
         let sigma = (1.4826 * *med).max(1e-12 * scale);
-        let robust_w = |i: usize| {
-            let t = (resid[i] / sigma).abs();
-            let u = if tuning.0 {
-                let q = t / tuning.1;
-                if q < 1.0 {
-                    (1.0 - q * q).powi(2)
-                } else {
-                    0.0
-                }
-            } else if t <= tuning.1 {
-                1.0
-            } else {
-                tuning.1 / t
-            };
-            w(i) * u
-        };
+        let robust_w = |i: usize| w(i) * opts.robust.weight((resid[i] / sigma).abs());
         let [q] = accumulate::<1>(n, gamma_r, &robust_w, [values]);
         let next = solve_quadratic(&q, p, opts, constrained.then_some(bounds), rep);
         let change = (0..7)
@@ -309,7 +281,7 @@ fn solve_quadratic(
         rep.alternations += 1;
         let (a, b) = quad.c_system(&p);
         let c = match bounds {
-            Some((lc, _)) => Some(solve_box(&a, &b, &SVector::<f64, 4>::repeat(lc))),
+            Some((lc, _)) => Some(solve_box_fixed(&a, &b, &SVector::<f64, 4>::repeat(lc))),
             None => solve_spd(&a, &b),
         };
         if let Some(c) = c {
@@ -317,7 +289,7 @@ fn solve_quadratic(
         }
         let (a, b) = quad.d_system(&p);
         let d = match bounds {
-            Some((_, ld)) => Some(solve_box(&a, &b, &SVector::<f64, 3>::repeat(ld))),
+            Some((_, ld)) => Some(solve_box_fixed(&a, &b, &SVector::<f64, 3>::repeat(ld))),
             None => solve_spd(&a, &b),
         };
         if let Some(d) = d {

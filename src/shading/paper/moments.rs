@@ -10,7 +10,7 @@
 // Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
 #![allow(clippy::needless_range_loop)]
 
-use super::bernstein::basis3;
+use crate::shading::bernstein::basis3;
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
 
@@ -166,72 +166,6 @@ impl Quadratic {
     }
 }
 
-/// Solve the symmetric positive semi-definite `A y = b`; a relative ridge of 1e-12 keeps a
-/// rank-deficient system (e.g. all samples at one depth) solvable with the minimum-change answer.
-pub(crate) fn solve_spd<const N: usize>(
-    a: &SMatrix<f64, N, N>,
-    b: &SVector<f64, N>,
-) -> Option<SVector<f64, N>> {
-    let scale = (0..N)
-        .map(|i| a[(i, i)].abs())
-        .fold(0.0, f64::max)
-        .max(1e-300);
-    let ridge = SMatrix::<f64, N, N>::identity() * (scale * 1e-12);
-    (a + ridge).cholesky().map(|c| c.solve(b))
-}
-
-/// Minimise `y^T A y - 2 b^T y` subject to `y >= lb` (A symmetric PSD, N <= 4): every active
-/// set is tried and the best feasible candidate kept, which is exact for a convex problem
-/// this small (at most 16 tiny solves).
-pub(crate) fn solve_box<const N: usize>(
-    a: &SMatrix<f64, N, N>,
-    b: &SVector<f64, N>,
-    lb: &SVector<f64, N>,
-) -> SVector<f64, N> {
-    let q = |y: &SVector<f64, N>| y.dot(&(a * y)) - 2.0 * b.dot(y);
-    let mut best = *lb;
-    let mut best_q = q(lb);
-    for mask in 1u32..(1 << N) {
-        let free: Vec<usize> = (0..N).filter(|i| mask & (1 << i) != 0).collect();
-        let m = free.len();
-        // Reduced system on the free variables, the others held at their bound.
-        let mut ar = nalgebra::DMatrix::<f64>::zeros(m, m);
-        let mut br = nalgebra::DVector::<f64>::zeros(m);
-        for (ri, &i) in free.iter().enumerate() {
-            br[ri] = b[i];
-            for j in 0..N {
-                if mask & (1 << j) == 0 {
-                    br[ri] -= a[(i, j)] * lb[j];
-                }
-            }
-            for (ci, &j) in free.iter().enumerate() {
-                ar[(ri, ci)] = a[(i, j)];
-            }
-        }
-        let scale = (0..m)
-            .map(|i| ar[(i, i)].abs())
-            .fold(0.0, f64::max)
-            .max(1e-300);
-        for i in 0..m {
-            ar[(i, i)] += scale * 1e-12;
-        }
-        let Some(ch) = ar.cholesky() else { continue };
-        let yr = ch.solve(&br);
-        let mut y = *lb;
-        for (ri, &i) in free.iter().enumerate() {
-            y[i] = yr[ri];
-        }
-        if free.iter().all(|&i| y[i] >= lb[i]) {
-            let qy = q(&y);
-            if qy < best_q {
-                best_q = qy;
-                best = y;
-            }
-        }
-    }
-    best
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -262,14 +196,5 @@ mod tests {
             q.cost(&th),
             direct
         );
-    }
-
-    #[test]
-    fn box_qp_matches_hand_solution() {
-        // min (y0-1)^2 + (y1+2)^2 with y >= 0  →  y = (1, 0).
-        let a = SMatrix::<f64, 2, 2>::identity();
-        let b = SVector::<f64, 2>::new(1.0, -2.0);
-        let y = solve_box(&a, &b, &SVector::<f64, 2>::zeros());
-        assert!((y[0] - 1.0).abs() < 1e-9 && y[1] == 0.0, "{y}");
     }
 }

@@ -10,15 +10,33 @@
 //! BENCHMARKS.md, the texel-linked solve). Measured on the 80-frame demo, gains RMS relative to the
 //! reference: 1 step 2.8%, 2 steps 2.3%, 3 steps 2.2% but worst frame 4.6% -> 5.5%.
 
+use super::light::Consensus;
 use crate::shading::frame_shading::LUMA;
 use crate::shading::CalibratedModel;
 use crate::texture::delight::{delight_frame, DelightOptions};
+use crate::texture::fusion::fuse;
 use crate::texture::fusion::{FrameStream, FusedTexture};
 use crate::texture::texels::TexelSet;
 use crate::Result;
 
 /// Fewest frames a texel must be fused from to serve as a reference.
 pub const MIN_FRAMES: u32 = 3;
+
+/// One correction of `model`'s gains against the consensus texture fused with it.
+pub fn correct_gains(consensus: &Consensus, model: &mut CalibratedModel) -> Result<()> {
+    let first = model.clone();
+    let mut stream = consensus.frames(&first, "refine gains", consensus.fusion.method.passes() + 1);
+    let fused = fuse(&consensus.scene.texels, &mut stream, &consensus.fusion)?;
+    refine_gains_against_texture(
+        model,
+        &consensus.scene.texels,
+        &fused,
+        &mut stream,
+        &consensus.fusion.delight,
+    )?;
+    stream.progress.finish();
+    Ok(())
+}
 
 /// Correct `model.gains` in place with one step against `fused` (fused from `frames`, whose
 /// shading is `model`); the reference frame keeps gain 1. Returns the correction factor of

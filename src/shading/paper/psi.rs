@@ -1,7 +1,7 @@
 //! `PsiModel`: the fitted shading of one viewpoint (paper, eq. 2–4), as stored in `shading.json`.
 
-use super::bernstein::{basis3, eval3};
-use super::samples::{normalised_depth, ExclusionCounts};
+use crate::shading::bernstein::{basis3, eval3};
+use crate::shading::samples::{normalised_depth, ExclusionCounts};
 use serde::{Deserialize, Serialize};
 
 /// `Psi_p(gamma, z) = rho(gamma) * varrho(z)` per colour channel for one viewpoint p.

@@ -7,14 +7,13 @@
 //! `w_i ∝ (1 - p_i / p_k+1) / p_i`. A viewpoint's weight reaches 0 exactly when it leaves the
 //! k nearest, so the shading changes continuously along any camera path.
 
+use super::psi::PsiModel;
 use crate::camera::pose::{camera_centre, viewing_direction};
 use crate::math::{Affine, Point3, Vector3};
-use crate::shading::psi::PsiModel;
-use crate::shading::CalibratedModel;
 
-/// How the fitted Psi models are chosen for a new view.
+/// How the fitted viewpoints' Psi are chosen for a new view.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum ShadingMode {
+pub enum PsiLookup {
     /// The paper: the viewpoint with the nearest camera centre (ties by viewing direction).
     Nearest,
     /// Blend the `k` nearest viewpoints with continuous weights.
@@ -24,9 +23,43 @@ pub enum ShadingMode {
     },
 }
 
-impl Default for ShadingMode {
+/// The lookups by name (the command line's `render --shading`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PsiLookupKind {
+    /// [`PsiLookup::Nearest`] (the paper).
+    Nearest,
+    /// [`PsiLookup::KNearest`].
+    Blend,
+}
+
+impl PsiLookup {
+    /// Viewpoints blended by default.
+    pub const DEFAULT_K: usize = 4;
+
+    /// The lookup `kind`; `k` (at least 1) viewpoints are blended by [`PsiLookupKind::Blend`].
+    pub fn of_kind(kind: PsiLookupKind, k: usize) -> PsiLookup {
+        match kind {
+            PsiLookupKind::Nearest => PsiLookup::Nearest,
+            PsiLookupKind::Blend => PsiLookup::KNearest { k: k.max(1) },
+        }
+    }
+}
+
+impl std::fmt::Display for PsiLookup {
+    /// "nearest" or "k-nearest (k = 4)".
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PsiLookup::Nearest => write!(f, "nearest"),
+            PsiLookup::KNearest { k } => write!(f, "k-nearest (k = {k})"),
+        }
+    }
+}
+
+impl Default for PsiLookup {
     fn default() -> Self {
-        ShadingMode::KNearest { k: 4 }
+        PsiLookup::KNearest {
+            k: PsiLookup::DEFAULT_K,
+        }
     }
 }
 
@@ -93,10 +126,10 @@ impl ViewpointIndex {
     }
 
     /// Viewpoints and normalised weights (summing to 1) for a new camera.
-    pub fn weights(&self, camera_to_world: &Affine, mode: ShadingMode) -> Vec<(usize, f64)> {
+    pub fn weights(&self, camera_to_world: &Affine, mode: PsiLookup) -> Vec<(usize, f64)> {
         match mode {
-            ShadingMode::Nearest => self.nearest(camera_to_world).map(|i| vec![(i, 1.0)]),
-            ShadingMode::KNearest { k } => Some(self.blend(camera_to_world, k.max(1))),
+            PsiLookup::Nearest => self.nearest(camera_to_world).map(|i| vec![(i, 1.0)]),
+            PsiLookup::KNearest { k } => Some(self.blend(camera_to_world, k.max(1))),
         }
         .unwrap_or_default()
     }
@@ -160,7 +193,7 @@ impl<'a> BlendedPsi<'a> {
         psi: &'a [PsiModel],
         index: &ViewpointIndex,
         camera_to_world: &Affine,
-        mode: ShadingMode,
+        mode: PsiLookup,
     ) -> BlendedPsi<'a> {
         let terms = index
             .weights(camera_to_world, mode)
@@ -189,59 +222,10 @@ impl<'a> BlendedPsi<'a> {
     }
 }
 
-/// The shading of a new view: the paper's (blended) per-viewpoint Psi, or the calibrated light
-/// of the whole video, which moves with the new camera (`rho(gamma) s(theta) / z²` at the
-/// reference gain, plus the median inter-reflection term when fitted).
-#[derive(Clone, Debug)]
-pub enum ViewShader<'a> {
-    /// Psi of the nearest (or k nearest) fitted viewpoints.
-    Paper(BlendedPsi<'a>),
-    /// The calibrated light model.
-    Calibrated {
-        /// The model.
-        model: &'a CalibratedModel,
-        /// Its ambient term for new views (per channel, linear intensity).
-        ambient: [f32; 3],
-    },
-}
-
-impl<'a> ViewShader<'a> {
-    /// The shader of a new camera: calibrated when `calibrated` is given, else Psi chosen by
-    /// `mode`.
-    pub fn new(
-        psi: &'a [PsiModel],
-        index: &ViewpointIndex,
-        calibrated: Option<&'a CalibratedModel>,
-        camera_to_world: &Affine,
-        mode: ShadingMode,
-    ) -> ViewShader<'a> {
-        match calibrated {
-            Some(model) => ViewShader::Calibrated {
-                model,
-                ambient: model.new_view_ambient().map(|a| a as f32),
-            },
-            None => ViewShader::Paper(BlendedPsi::new(psi, index, camera_to_world, mode)),
-        }
-    }
-
-    /// Intensity of unit albedo seen at `gamma`, distance `z` (mm), along a ray `cos_theta` off
-    /// the optical axis: (scale, offset) per channel, pixel = albedo · scale + offset.
-    #[inline]
-    pub fn eval_rgb(&self, gamma: f32, z: f32, cos_theta: f32) -> ([f32; 3], [f32; 3]) {
-        match self {
-            ViewShader::Paper(b) => (b.eval_rgb(gamma, z), [0.0; 3]),
-            ViewShader::Calibrated { model, ambient } => {
-                let s = model.eval_rgb(gamma as f64, cos_theta as f64, z as f64, 1.0);
-                (s.map(|v| v as f32), *ambient)
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shading::samples::ExclusionCounts;
+    use crate::shading::ExclusionCounts;
 
     fn at(x: f64, dir_z: f64) -> PsiModel {
         // Rotation about y so the viewing direction (third column) is (sin, 0, cos).
@@ -280,7 +264,7 @@ mod tests {
     fn blend_weights_are_normalised_and_continuous() {
         let psi: Vec<PsiModel> = (0..6).map(|i| at(i as f64 * 3.0, 1.0)).collect();
         let idx = ViewpointIndex::new(&psi);
-        let mode = ShadingMode::KNearest { k: 3 };
+        let mode = PsiLookup::KNearest { k: 3 };
         let mut prev: Option<f32> = None;
         for s in 0..=300 {
             let x = s as f64 * 0.05;

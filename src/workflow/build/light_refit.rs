@@ -14,11 +14,37 @@
 //! followed by a gain correction): cone profile 6.9% -> 0.4% RMS, gains RMS 2.14% -> 1.85%,
 //! truth views 31.99 -> 32.54 dB; seeds 2 and 3 alike (BENCHMARKS.md).
 
+use super::fit_pass::LightSamples;
+use super::light::Consensus;
+use crate::image::Frame;
 use crate::raycast::GBuffer;
-use crate::render::MipTexture;
-use crate::shading::PooledSamples;
-use crate::shading::{fit_calibrated_with_albedo, CalibratedModel, CalibratedOptions};
+use crate::render::{MipOptions, MipTexture};
+use crate::shading::calibrated::{
+    fit_calibrated_with_albedo, CalibratedModel, CalibratedOptions, PooledSamples,
+};
 use crate::Result;
+
+/// One refit of `model`'s shape (rho, s, kappa) with each pooled sample's albedo taken from
+/// the consensus texture fused with the current light; the gains are kept.
+pub fn refit_light_against_texture(
+    consensus: &Consensus,
+    model: &mut CalibratedModel,
+    samples: &LightSamples,
+    density: &[f32],
+    opts: &CalibratedOptions,
+) -> Result<()> {
+    let scene = consensus.scene;
+    let fused = consensus.fuse(model, "refit light")?;
+    let image = Frame {
+        width: scene.atlas.width,
+        height: scene.atlas.height,
+        rgb: fused.filled(&scene.texels)?,
+    };
+    let texel_mm = scene.atlas.texel_mm;
+    let texture = MipTexture::new(&image, None, texel_mm, &MipOptions::default())?;
+    let albedo = sample_albedo(&texture, &samples.uv);
+    refit_light_with_albedo(model, &samples.pooled, density, &albedo, opts)
+}
 
 /// The texture coordinates of the surface points seen by the pixels `pixels` of a frame
 /// (its G-buffer `gbuffer`; `tri_uv` the UV corners of every triangle).
@@ -92,8 +118,6 @@ pub fn refit_light_with_albedo(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::Frame;
-    use crate::render::MipOptions;
 
     #[test]
     fn sample_albedo_is_relative_to_each_channels_mean() {

@@ -29,9 +29,9 @@
 use nalgebra::{Matrix5, Vector5, Vector6};
 use rayon::prelude::*;
 
-use super::calibrated::CalibratedModel;
-use super::calibrated_fit::{fit_calibrated_with_albedo, CalibratedOptions};
-use super::calibrated_samples::PooledSamples;
+use super::fit::{fit_calibrated_with_albedo, CalibratedOptions};
+use super::model::CalibratedModel;
+use super::samples::PooledSamples;
 use crate::{Error, Result};
 
 /// Huber constant of the regression's IRLS.

@@ -1,12 +1,12 @@
 //! Plots of the calibrated light model for the report: rho(gamma) per channel, the light's
 //! angular profile s(theta) in degrees, and the per-frame gains. `.svg` paths write SVG,
-//! anything else PNG (as in [`super::plots`]).
+//! anything else PNG (see [`crate::shading::plotting`]).
 
 // Indexing the channel colour table by channel reads clearer than zips.
 #![allow(clippy::needless_range_loop)]
 
-use super::calibrated::CalibratedModel;
-use super::plots::{render, CURVE_RGB, FONT_NAME};
+use super::model::CalibratedModel;
+use crate::shading::plotting::{render, CURVE_RGB, FONT_NAME};
 use crate::{Error, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;

@@ -22,10 +22,12 @@
 // `!(x > t)` on floats is deliberate: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use super::calibrated::{bernstein_eval, CalibratedModel};
-use super::calibrated_moments::{accumulate, cost, normal_equations, t_of, FrameMoments, Layout};
-use super::calibrated_samples::PooledSamples;
-use super::fit::Robust;
+use super::model::CalibratedModel;
+use super::moments::{accumulate, cost, normal_equations, t_of, FrameMoments, Layout};
+use super::samples::PooledSamples;
+use crate::shading::bernstein::bernstein_eval;
+use crate::shading::robust::Robust;
+use crate::shading::solve::solve_box;
 use crate::{Error, Result};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -345,9 +347,7 @@ fn model_of(
             (0..lay.frames)
                 .map(|f| {
                     let light = frame_light.get(f).copied().unwrap_or(0.0);
-                    std::array::from_fn(|c| {
-                        super::calibrated_moments::ambient_of(lay, p, light, f, c)
-                    })
+                    std::array::from_fn(|c| super::moments::ambient_of(lay, p, light, f, c))
                 })
                 .collect()
         }),
@@ -433,75 +433,12 @@ fn block_step(p: &mut [f64], h: &DMatrix<f64>, grad: &DVector<f64>, idx: &[usize
     let a = DMatrix::from_fn(n, n, |r, c| h[(idx[r], idx[c])]);
     let x0 = DVector::from_fn(n, |r, _| p[idx[r]]);
     let b = &a * &x0 - DVector::from_fn(n, |r, _| grad[idx[r]]);
-    let x = solve_box_dyn(&a, &b, &DVector::from_column_slice(lb));
+    let x = solve_box(&a, &b, &DVector::from_column_slice(lb));
     for (r, &k) in idx.iter().enumerate() {
         if x[r].is_finite() {
             p[k] = x[r];
         }
     }
-}
-
-/// Minimise `y^T A y - 2 b^T y` subject to `y >= lb` (A symmetric PSD). Unbounded entries have
-/// `lb = -inf`. Exact by enumerating active sets for n <= 10 (the blocks here are tiny).
-pub(crate) fn solve_box_dyn(a: &DMatrix<f64>, b: &DVector<f64>, lb: &DVector<f64>) -> DVector<f64> {
-    let n = a.nrows();
-    let bounded: Vec<usize> = (0..n).filter(|&i| lb[i].is_finite()).collect();
-    let q = |y: &DVector<f64>| y.dot(&(a * y)) - 2.0 * b.dot(y);
-    let solve_with = |fixed: &[usize]| -> Option<DVector<f64>> {
-        let free: Vec<usize> = (0..n).filter(|i| !fixed.contains(i)).collect();
-        let mut y = DVector::from_fn(n, |i, _| if fixed.contains(&i) { lb[i] } else { 0.0 });
-        if free.is_empty() {
-            return Some(y);
-        }
-        let m = free.len();
-        let mut ar = DMatrix::from_fn(m, m, |r, c| a[(free[r], free[c])]);
-        let br = DVector::from_fn(m, |r, _| {
-            b[free[r]] - fixed.iter().map(|&j| a[(free[r], j)] * lb[j]).sum::<f64>()
-        });
-        let scale = (0..m)
-            .map(|i| ar[(i, i)].abs())
-            .fold(0.0, f64::max)
-            .max(1e-300);
-        for i in 0..m {
-            ar[(i, i)] += scale * 1e-12;
-        }
-        let yr = ar.cholesky()?.solve(&br);
-        for (r, &i) in free.iter().enumerate() {
-            y[i] = yr[r];
-        }
-        Some(y)
-    };
-    if let Some(y) = solve_with(&[]) {
-        if bounded.iter().all(|&i| y[i] >= lb[i]) {
-            return y;
-        }
-    }
-    if bounded.len() > 10 {
-        // Not expected here: clamp the unconstrained answer.
-        let mut y = solve_with(&[]).unwrap_or_else(|| lb.map(|v| v.max(0.0)));
-        for &i in &bounded {
-            y[i] = y[i].max(lb[i]);
-        }
-        return y;
-    }
-    let mut best: Option<(f64, DVector<f64>)> = None;
-    for mask in 1u32..(1 << bounded.len()) {
-        let fixed: Vec<usize> = (0..bounded.len())
-            .filter(|k| mask & (1 << k) != 0)
-            .map(|k| bounded[k])
-            .collect();
-        let Some(y) = solve_with(&fixed) else {
-            continue;
-        };
-        if bounded.iter().all(|&i| y[i] >= lb[i]) {
-            let qy = q(&y);
-            if best.as_ref().is_none_or(|(bq, _)| qy < *bq) {
-                best = Some((qy, y));
-            }
-        }
-    }
-    best.map(|(_, y)| y)
-        .unwrap_or_else(|| lb.map(|v| if v.is_finite() { v } else { 0.0 }))
 }
 
 /// Alternation then LM polish on the moments `m`, from `p`.
@@ -627,7 +564,7 @@ fn predict(
     std::array::from_fn(|c| {
         let alb = albedo.map_or(1.0, |a| f64::from(a[c][i]));
         let light = samples.frame_light.get(f).copied().unwrap_or(0.0);
-        let amb = super::calibrated_moments::ambient_of(lay, p, light, f, c);
+        let amb = super::moments::ambient_of(lay, p, light, f, c);
         k * alb * bernstein_eval(&p[lay.c_off(c)..lay.c_off(c) + lay.nr], gam) + amb
     })
 }
@@ -682,26 +619,7 @@ fn robust_weights(
             if !ui.is_finite() {
                 return 0.0;
             }
-            let x = f64::from(ui) / sigma;
-            let r = match opts.robust {
-                Robust::None => 1.0,
-                Robust::Huber(k) => {
-                    if x <= k {
-                        1.0
-                    } else {
-                        k / x
-                    }
-                }
-                Robust::Tukey(c) => {
-                    let q = x / c;
-                    if q < 1.0 {
-                        (1.0 - q * q).powi(2)
-                    } else {
-                        0.0
-                    }
-                }
-            };
-            (f64::from(bi) * r) as f32
+            (f64::from(bi) * opts.robust.weight(f64::from(ui) / sigma)) as f32
         })
         .collect()
 }

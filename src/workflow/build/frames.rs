@@ -2,13 +2,11 @@
 //! source (never all in memory), each with its depth buffer (cached from the fit pass while
 //! the cache fits its memory budget, else ray cast again) and its fitted shading.
 
+use super::scene::BuildScene;
 use crate::image::Frame;
-use crate::io::case::Case;
 use crate::io::frame_source::FrameSource;
-use crate::raycast::{cast_frame_with, RayTable, Scene};
-use crate::shading::frame_shading::FrameShading;
-use crate::shading::psi::PsiModel;
-use crate::shading::CalibratedModel;
+use crate::raycast::cast_frame_with;
+use crate::shading::FrameShaders;
 use crate::texture::delight::Observation;
 use crate::texture::fusion::FrameStream;
 use crate::workflow::progress::Progress;
@@ -46,31 +44,10 @@ impl DepthCache {
     }
 }
 
-/// Which fitted model de-lights the frames.
-#[derive(Clone, Copy, Debug)]
-pub enum FrameShadingSource<'a> {
-    /// Each frame's own Psi (the paper).
-    Paper(&'a [PsiModel]),
-    /// The calibrated light at each frame's gain.
-    Calibrated(&'a CalibratedModel),
-}
-
-impl<'a> FrameShadingSource<'a> {
-    fn of(&self, frame: usize) -> FrameShading<'a> {
-        match *self {
-            FrameShadingSource::Paper(psi) => FrameShading::Paper(&psi[frame]),
-            FrameShadingSource::Calibrated(model) => FrameShading::Calibrated { model, frame },
-        }
-    }
-}
-
 /// The frames of a case (a subset of them, in increasing order) for the fusion passes.
 pub struct CaseFrames<'a> {
-    case: &'a Case,
-    scene: &'a Scene,
-    rays: &'a RayTable,
-    shading: FrameShadingSource<'a>,
-    cache: &'a DepthCache,
+    scene: &'a BuildScene,
+    shading: &'a dyn FrameShaders,
     /// Frame indices (into the case) of the stream's frames, increasing.
     subset: Vec<usize>,
     source: Option<FrameSource>,
@@ -82,22 +59,16 @@ pub struct CaseFrames<'a> {
 }
 
 impl<'a> CaseFrames<'a> {
-    /// Stream the frames `subset` (case indices, increasing) of `case`.
+    /// Stream the frames `subset` (case indices, increasing) of `scene`'s case.
     pub fn new(
-        case: &'a Case,
-        scene: &'a Scene,
-        rays: &'a RayTable,
-        shading: FrameShadingSource<'a>,
-        cache: &'a DepthCache,
+        scene: &'a BuildScene,
+        shading: &'a dyn FrameShaders,
         subset: Vec<usize>,
         progress: Progress,
     ) -> CaseFrames<'a> {
         CaseFrames {
-            case,
             scene,
-            rays,
             shading,
-            cache,
             subset,
             source: None,
             next: 0,
@@ -119,7 +90,7 @@ impl FrameStream for CaseFrames<'_> {
             .get(k)
             .ok_or_else(|| Error::Other(format!("frame {k} of {} asked for", self.subset.len())))?;
         if self.source.is_none() || index < self.next {
-            self.source = Some(self.case.frame_source()?);
+            self.source = Some(self.scene.case.frame_source()?);
             self.next = 0;
         }
         let src = self.source.as_mut().expect("opened above");
@@ -132,20 +103,20 @@ impl FrameStream for CaseFrames<'_> {
             }
             self.next += 1;
         }
-        let pose = &self.case.poses[index].pose.camera_to_world;
-        let depth: &[f32] = match self.cache.get(index) {
+        let pose = &self.scene.poses[index];
+        let depth: &[f32] = match self.scene.cache.get(index) {
             Some(d) => d,
             None => {
-                self.depth = cast_frame_with(self.scene, self.rays, pose).z;
+                self.depth = cast_frame_with(&self.scene.scene, &self.scene.rays, pose).z;
                 &self.depth
             }
         };
         self.progress.inc();
         Ok(Observation {
             frame: &self.frame,
-            camera: &self.case.camera,
+            camera: &self.scene.case.camera,
             camera_to_world: pose,
-            shading: self.shading.of(index),
+            shading: self.shading.frame_shading(index),
             depth,
         })
     }

@@ -10,46 +10,10 @@
 //! `kappa_c · L_f`, three parameters for the video times the frame's mean observed luminance
 //! (see `calibrated_fit::CalibratedOptions::interreflection`), or free per frame (`--ambient`).
 
-use super::frame_shading::LUMA;
+use crate::shading::frame_shading::LUMA;
 use serde::{Deserialize, Serialize};
 
-/// The Bernstein basis `B_i^n(t)`, `i = 0..=n`, of degree `n = out.len() - 1`, written into `out`.
-#[inline]
-pub(crate) fn basis_into(t: f64, out: &mut [f64]) {
-    let n = out.len() - 1;
-    let s = 1.0 - t;
-    let mut tp = 1.0;
-    for o in out.iter_mut() {
-        *o = tp;
-        tp *= t;
-    }
-    let mut sp = 1.0;
-    for o in out.iter_mut().rev() {
-        *o *= sp;
-        sp *= s;
-    }
-    let mut binom = 1.0;
-    for (i, o) in out.iter_mut().enumerate() {
-        *o *= binom;
-        binom = binom * (n - i) as f64 / (i + 1) as f64;
-    }
-}
-
-/// `sum_i coeffs[i] B_i^n(t)` with `n = coeffs.len() - 1` (de Casteljau: stable, allocation free
-/// for degrees up to 15).
-#[inline]
-pub fn bernstein_eval(coeffs: &[f64], t: f64) -> f64 {
-    let n = coeffs.len();
-    debug_assert!((1..=16).contains(&n));
-    let mut b = [0.0f64; 16];
-    b[..n].copy_from_slice(coeffs);
-    for k in (1..n).rev() {
-        for i in 0..k {
-            b[i] = b[i] * (1.0 - t) + b[i + 1] * t;
-        }
-    }
-    b[0]
-}
+use crate::shading::bernstein::bernstein_eval;
 
 /// The fitted calibrated light model, as stored under "calibrated" in `shading.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -274,26 +238,6 @@ impl CalibratedModel {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shading::bernstein::bernstein;
-
-    #[test]
-    fn general_basis_matches_formula_and_eval() {
-        for n in 0..7usize {
-            let mut b = vec![0.0; n + 1];
-            let coeffs: Vec<f64> = (0..=n).map(|i| 0.3 + 0.1 * i as f64).collect();
-            for k in 0..=10 {
-                let t = f64::from(k) / 10.0;
-                basis_into(t, &mut b);
-                let mut direct = 0.0;
-                for i in 0..=n {
-                    let e = bernstein(n as u32, i as u32, t);
-                    assert!((b[i] - e).abs() < 1e-14, "n {n} i {i} t {t}");
-                    direct += coeffs[i] * e;
-                }
-                assert!((bernstein_eval(&coeffs, t) - direct).abs() < 1e-14);
-            }
-        }
-    }
 
     #[test]
     fn eval_is_inverse_square_and_one_on_axis() {

@@ -1,0 +1,135 @@
+//! The calibrated light of the whole video (DESIGN.md, "Beyond the paper"), fitted on the
+//! samples pooled by the first pass, in four steps:
+//! 1. the pooled fit with a uniform albedo (rho, s, kappa, a gain per frame);
+//! 2. refits with each pixel's albedo predicted from its colour (`--chroma-refits`);
+//! 3. corrections of the gains against a texture fused with them ([`super::gain_correction`]);
+//! 4. refits of the light's shape with the fused texture's albedo, each followed by one more
+//!    gain correction ([`super::light_refit`], `--light-refits`).
+
+use super::fit_pass::LightSamples;
+use super::frames::CaseFrames;
+use super::gain_correction::correct_gains;
+use super::light_refit::refit_light_against_texture;
+use super::options::BuildOptions;
+use super::scene::BuildScene;
+use crate::model::manifest::LightFitSettings;
+use crate::shading::calibrated::{
+    density_weights_3d, fit_calibrated, refit_with_chroma_albedo, CalibratedModel,
+    CalibratedOptions,
+};
+use crate::shading::{ShadingKind, WeightOptions};
+use crate::texture::fusion::{fuse, FusedTexture, FusionMethod, FusionOptions};
+use crate::{Error, Result};
+
+/// The fitted light and how it was fitted (model.json's `light_fit`).
+pub struct CalibratedLight {
+    /// The light.
+    pub model: CalibratedModel,
+    /// The settings it was fitted with.
+    pub settings: LightFitSettings,
+}
+
+/// Fit the calibrated light on `samples`. `None` when nothing was pooled, or when the fit
+/// failed and the paper's Psi can stand in (said in `warnings`).
+pub fn calibrated_light(
+    scene: &BuildScene,
+    samples: LightSamples,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+) -> Result<Option<CalibratedLight>> {
+    let n = scene.frame_count();
+    if samples.pooled.is_empty() {
+        return Ok(None);
+    }
+    let density = density_weights_3d(&samples.pooled, &WeightOptions::default());
+    // The reference gain (g = 1, the exposure new views are rendered at): the middle frame
+    // unless set, because a frame mid-video shares the most surface with the others (the
+    // first frame sees the cut top of the trachea, which no other frame sees).
+    let cal_opts = CalibratedOptions {
+        reference_frame: opts.calibrated_reference.unwrap_or(n / 2).min(n - 1),
+        ..opts.calibrated.clone()
+    };
+    let mut model = match fit_calibrated(&samples.pooled, &density, &cal_opts) {
+        Ok(fit) => fit.model,
+        Err(e) if opts.shading == Some(ShadingKind::Calibrated) => {
+            return Err(Error::Other(format!("calibrated light fit: {e}")))
+        }
+        Err(e) => {
+            warnings.push(format!(
+                "calibrated light fit failed ({e}); using the paper's Psi"
+            ));
+            return Ok(None);
+        }
+    };
+    for _ in 0..opts.chroma_refits {
+        refit_with_chroma_albedo(&mut model, &samples.pooled, &density, &cal_opts)?;
+    }
+    let consensus = Consensus::new(scene, opts);
+    for _ in 0..opts.refine_gains {
+        correct_gains(&consensus, &mut model)?;
+    }
+    for _ in 0..opts.refine_light {
+        refit_light_against_texture(&consensus, &mut model, &samples, &density, &cal_opts)?;
+        correct_gains(&consensus, &mut model)?;
+    }
+    let settings = LightFitSettings {
+        rho_degree: cal_opts.rho_degree,
+        s_degree: cal_opts.s_degree,
+        robust: cal_opts.robust.to_string(),
+        ambient_per_frame: cal_opts.ambient,
+        interreflection: cal_opts.interreflection,
+        reference_frame: model.reference_frame,
+        gain_corrections: opts.refine_gains,
+        light_refits: opts.refine_light,
+        chroma_refits: opts.chroma_refits,
+    };
+    Ok(Some(CalibratedLight { model, settings }))
+}
+
+/// The reference texture the light's refinements compare against: every frame de-lit with the
+/// current light and fused by the plain predicted-intensity average (one pass, every frame's
+/// share in every texel): a consensus, not the sharpest texture.
+pub struct Consensus<'a> {
+    /// The scene the frames are streamed from.
+    pub scene: &'a BuildScene,
+    /// The fusion of the reference texture.
+    pub fusion: FusionOptions,
+    /// No progress bars.
+    pub quiet: bool,
+}
+
+impl<'a> Consensus<'a> {
+    /// The consensus fusion of the build `opts`.
+    pub fn new(scene: &'a BuildScene, opts: &BuildOptions) -> Consensus<'a> {
+        Consensus {
+            scene,
+            fusion: FusionOptions {
+                method: FusionMethod::WeightedAverage {
+                    weight_exponent: 1.0,
+                },
+                ..opts.fusion.clone()
+            },
+            quiet: opts.quiet,
+        }
+    }
+
+    /// Every frame shaded by `model`, with a progress bar over `passes` passes.
+    pub fn frames<'b>(
+        &'b self,
+        model: &'b CalibratedModel,
+        label: &str,
+        passes: usize,
+    ) -> CaseFrames<'b> {
+        let n = self.scene.frame_count();
+        self.scene
+            .frames(model, (0..n).collect(), label, passes, self.quiet)
+    }
+
+    /// The consensus texture of every frame de-lit with `model`.
+    pub fn fuse(&self, model: &CalibratedModel, label: &str) -> Result<FusedTexture> {
+        let mut stream = self.frames(model, label, self.fusion.method.passes());
+        let fused = fuse(&self.scene.texels, &mut stream, &self.fusion)?;
+        stream.progress.finish();
+        Ok(fused)
+    }
+}

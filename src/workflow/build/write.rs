@@ -1,0 +1,160 @@
+//! The last stage: the model folder (DESIGN.md, "Output: the model folder") — textures, mesh,
+//! segmentation, shading.json, model.json — and the report with its new views (paper Fig. 4),
+//! rendered from the model as written.
+
+use std::time::Instant;
+
+use super::fit_pass::FitPass;
+use super::options::BuildOptions;
+use super::scene::BuildScene;
+use super::textures::Textures;
+use crate::io::atomic::{write_bytes_atomic, write_json_atomic};
+use crate::io::nifti::write_nifti;
+use crate::io::output_dir::OutputDir;
+use crate::model::manifest::{
+    relative_path, BuildTimings, CrossValidation, ExtraTexture, LightFitSettings, ModelCounts,
+    ModelInputs, ModelManifest, MODEL_FORMAT_VERSION, PAPER_TEXTURE_FILE,
+};
+use crate::model::Model;
+use crate::shading::FittedShading;
+use crate::texture::output::{encode_albedo, write_texture_outputs};
+use crate::workflow::new_views_figure::{novel_figure, truth_figure};
+use crate::workflow::report::{write_report, ReportInputs};
+use crate::{Error, Result};
+
+/// Everything the build made, as the model folder stores it.
+pub struct BuiltModel<'a> {
+    /// The scene (case, segmentation, atlas).
+    pub scene: &'a BuildScene,
+    /// The first pass (fit quality, report frames).
+    pub pass: &'a FitPass,
+    /// The fitted shading models and the one in use.
+    pub shading: &'a FittedShading,
+    /// How the calibrated light was fitted, when it was.
+    pub light_fit: Option<LightFitSettings>,
+    /// The cross-validation of the shading models, when it ran.
+    pub cross_validation: Option<CrossValidation>,
+    /// The fused textures.
+    pub textures: &'a Textures,
+    /// Seconds per stage so far.
+    pub timings: BuildTimings,
+    /// What the build could not do as asked.
+    pub warnings: Vec<String>,
+}
+
+/// Write the model folder into `out_dir`, render its new views and report, and commit the
+/// folder into place. `started` is when the build began (for the total time).
+pub fn write_model(
+    out_dir: OutputDir,
+    built: &BuiltModel,
+    opts: &BuildOptions,
+    started: Instant,
+) -> Result<ModelManifest> {
+    let t = Instant::now();
+    let mut manifest = write_model_files(&out_dir, built)?;
+    // Fig. 4 is rendered from the model as written (airway.glb, shading.json, model.json).
+    write_json_atomic(&out_dir.join("model.json"), &manifest)?;
+    write_model_report(&out_dir, &manifest, built, opts)?;
+    manifest.timings.write = t.elapsed().as_secs_f64();
+    manifest.timings.total = started.elapsed().as_secs_f64();
+    write_json_atomic(&out_dir.join("model.json"), &manifest)?;
+    out_dir.commit()?;
+    Ok(manifest)
+}
+
+/// The textures, mesh, segmentation and shading.json; returns the manifest.
+fn write_model_files(out_dir: &OutputDir, built: &BuiltModel) -> Result<ModelManifest> {
+    let scene = built.scene;
+    let atlas = &scene.atlas;
+    let albedo = &built.textures.albedo;
+    let tex = write_texture_outputs(out_dir.path(), atlas, &albedo.rgb, &albedo.covered)?;
+    let paper_texture = match &built.textures.paper {
+        Some(paper) => {
+            let img = encode_albedo(&paper.rgb, atlas.width, atlas.height, &paper.covered)?;
+            write_bytes_atomic(&out_dir.join(PAPER_TEXTURE_FILE), &img.png)?;
+            Some(ExtraTexture {
+                file: PAPER_TEXTURE_FILE.into(),
+                albedo_scale: img.scale,
+                colour_balance: paper.colour_balance,
+            })
+        }
+        None => None,
+    };
+    write_nifti(
+        &out_dir.join("segmentation.nii.gz"),
+        &scene.segmentation.mask,
+    )?;
+    write_json_atomic(&out_dir.join("shading.json"), built.shading)?;
+    let fits = &built.pass.fits;
+    let mean_r2 = fits.iter().flat_map(|f| f.r2).sum::<f64>() / (3 * fits.len().max(1)) as f64;
+    let case = &scene.case;
+    Ok(ModelManifest {
+        format_version: MODEL_FORMAT_VERSION,
+        generator: format!("bronchosim {}", env!("CARGO_PKG_VERSION")),
+        inputs: ModelInputs {
+            case: case.dir.display().to_string(),
+            case_relative: std::path::absolute(&case.dir).ok().and_then(|c| {
+                let m = std::path::absolute(out_dir.target()).ok()?;
+                relative_path(&m, &c)
+            }),
+            ct: case.ct_source.path().display().to_string(),
+            camera: case.camera_path.display().to_string(),
+            poses: case.poses_path.display().to_string(),
+            frames: case.frames.path().display().to_string(),
+        },
+        counts: ModelCounts {
+            frames: scene.frame_count(),
+            triangles: atlas.mesh.triangles.len(),
+            atlas_size: [atlas.width, atlas.height],
+            chart_texels: scene.texels.len(),
+            covered_texels: tex.covered_texels,
+            charts: atlas.chart_count,
+            airway_volume_ml: scene.segmentation.volume_ml,
+        },
+        timings: built.timings.clone(),
+        fit_quality: fits.clone(),
+        mean_r2,
+        camera: case.camera,
+        albedo_scale: tex.albedo_scale,
+        colour_balance: albedo.colour_balance,
+        texel_mm: atlas.texel_mm,
+        shading_model: built.shading.model,
+        paper_texture,
+        cross_validation: built.cross_validation.clone(),
+        light_fit: built.light_fit.clone(),
+        warnings: built.warnings.clone(),
+        atlas_mean_l2_stretch: atlas.stats.mean_l2_stretch,
+        atlas_utilisation: atlas.stats.utilisation,
+    })
+}
+
+/// New views of the written model (against the truth views when given, else between training
+/// viewpoints: paper Fig. 4) and report.html.
+fn write_model_report(
+    out_dir: &OutputDir,
+    manifest: &ModelManifest,
+    built: &BuiltModel,
+    opts: &BuildOptions,
+) -> Result<()> {
+    let model = Model::load(out_dir.path())?;
+    let case = &built.scene.case;
+    let figure = match &opts.truth {
+        Some(truth) => {
+            let fig = truth_figure(&model, case, truth)?;
+            write_json_atomic(&out_dir.join("evaluation.json"), &fig.scores)?;
+            fig
+        }
+        None => novel_figure(&model, case)?,
+    };
+    let albedo_png = out_dir.join("albedo.png");
+    write_report(
+        &out_dir.join("report.html"),
+        &ReportInputs {
+            manifest,
+            frames: &built.pass.report_frames,
+            albedo_png: &std::fs::read(&albedo_png).map_err(|e| Error::io(&albedo_png, e))?,
+            new_views: Some(&figure),
+            shading: built.shading,
+        },
+    )
+}

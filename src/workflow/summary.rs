@@ -1,0 +1,132 @@
+//! What each command prints when it is done: one formatter per command's result, so the
+//! command line only parses, calls and prints.
+
+use std::path::Path;
+
+use crate::model::ModelManifest;
+use crate::phantom::PhantomSummary;
+use crate::render::evaluate::scores_text;
+use crate::workflow::demo::DemoSummary;
+use crate::workflow::flythrough::FlythroughSummary;
+use crate::workflow::render::RenderSummary;
+
+/// "held-out frames: paper 31.19 dB, calibrated 33.76 dB" (empty without cross-validation).
+fn held_out_text(m: &ModelManifest) -> String {
+    m.cross_validation.as_ref().map_or(String::new(), |cv| {
+        let parts: Vec<String> = cv
+            .models
+            .iter()
+            .map(|mc| format!("{} {:.2} dB", mc.model, mc.mean_psnr_db.unwrap_or(f64::NAN)))
+            .collect();
+        format!(" (held-out frames: {})", parts.join(", "))
+    })
+}
+
+impl DemoSummary {
+    /// The case, the model, its report and the truth views' scores.
+    pub fn to_text(&self) -> String {
+        let m = &self.manifest;
+        format!(
+            "phantom case {} ({} frames, {:.1} s)\nmodel {} in {:.1} s: {} triangles, atlas {}x{}, {:.0}% of chart texels seen, mean R² of Psi {:.3}, shading {}{}\nreport {}\n\
+             truth views rendered into {}; scores (PSNR dB / SSIM, same pixels, per-channel gain):\n{}\n",
+            self.case.display(),
+            m.counts.frames,
+            self.phantom_seconds,
+            self.model.display(),
+            m.timings.total,
+            m.counts.triangles,
+            m.counts.atlas_size[0],
+            m.counts.atlas_size[1],
+            100.0 * m.counts.covered_texels as f64 / m.counts.chart_texels.max(1) as f64,
+            m.mean_r2,
+            m.shading_model,
+            held_out_text(m),
+            self.model.join("report.html").display(),
+            self.views.display(),
+            scores_text(&self.scores)
+        )
+    }
+}
+
+/// What `build` made in `out`, and how well each model predicted the held-out frames.
+pub fn build_text(out: &Path, m: &ModelManifest) -> String {
+    let mut text = format!(
+        "built {} from {} frames in {:.1} s: {} triangles, atlas {}x{} ({} of {} texels seen), mean R² of Psi {:.3}, shading {}\n",
+        out.display(),
+        m.counts.frames,
+        m.timings.total,
+        m.counts.triangles,
+        m.counts.atlas_size[0],
+        m.counts.atlas_size[1],
+        m.counts.covered_texels,
+        m.counts.chart_texels,
+        m.mean_r2,
+        m.shading_model
+    );
+    if let Some(cv) = &m.cross_validation {
+        for mc in &cv.models {
+            text.push_str(&format!(
+                "  held-out frames ({} of {}): {} predicts them at {:.2} dB PSNR, SSIM {:.4}\n",
+                cv.held_out.len(),
+                m.counts.frames,
+                mc.model,
+                mc.mean_psnr_db.unwrap_or(f64::NAN),
+                mc.mean_ssim.unwrap_or(f64::NAN)
+            ));
+        }
+    }
+    text
+}
+
+impl PhantomSummary {
+    /// What was written into `out` in `seconds`, and each part's time.
+    pub fn to_text(&self, out: &Path, seconds: f64) -> String {
+        let s = self.seconds;
+        format!(
+            "wrote {}: CT {:?}, mesh {} triangles, {} frames, {} truth views in {seconds:.1} s \
+             (CT {:.1}, mesh {:.1}, path {:.1}, frames {:.1}, views {:.1}, CT file {:.1})\n",
+            out.display(),
+            self.ct_dims,
+            self.mesh_triangles,
+            self.frames,
+            self.views,
+            s[0],
+            s[1],
+            s[2],
+            s[3],
+            s[4],
+            s[5]
+        )
+    }
+}
+
+impl RenderSummary {
+    /// How many views were rendered into `out`, how fast, with which shading.
+    pub fn to_text(&self, out: &Path) -> String {
+        format!(
+            "rendered {} views into {} in {:.2} s ({:.1} views/s; shading {}; model loaded in {:.2} s)\n",
+            self.images.len(),
+            out.display(),
+            self.render_seconds,
+            self.images.len() as f64 / self.render_seconds.max(1e-9),
+            self.shading,
+            self.load_seconds
+        )
+    }
+}
+
+impl FlythroughSummary {
+    /// The flight: frames, path length, clearance, speed and the video.
+    pub fn to_text(&self) -> String {
+        format!(
+            "{}: {} frames along {:.1} mm (clearance >= {:.1} mm) in {:.1} s ({:.1} frames/s); {}\n",
+            self.out.display(),
+            self.frames,
+            self.path_length_mm,
+            self.min_clearance_mm,
+            self.render_seconds,
+            self.frames as f64 / self.render_seconds.max(1e-9),
+            self.video_note
+        )
+    }
+}
