@@ -48,9 +48,9 @@ pub enum FusionMethod {
 /// The fusion methods by name (the command line's `--fusion`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum FusionKind {
-    /// [`FusionMethod::WeightedAverage`].
+    /// The average weighted by the predicted intensity (`FusionMethod::WeightedAverage`).
     Average,
-    /// The paper's max-weight choice, [`FusionMethod::MaxWeightSmoothed`].
+    /// The paper's max-weight choice with smoothed weights (`FusionMethod::MaxWeightSmoothed`).
     Max,
 }
 

@@ -4,7 +4,10 @@
 mod args;
 
 use anyhow::Context;
-use args::{Cli, Command};
+use args::{
+    BuildArgs, Cli, Command, DemoArgs, EvaluateArgs, FlythroughArgs, InspectArgs, PhantomArgs,
+    RenderArgs, SegmentArgs,
+};
 use bronchosim::inspect::{inspect_case, InspectOptions};
 use bronchosim::math::Point3;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
@@ -22,201 +25,159 @@ use bronchosim::workflow::truth_eval::evaluate_with_baselines;
 use clap::Parser;
 use std::process::ExitCode;
 
+/// Run `command`; returns the summary to print (empty when the command printed its output).
 fn run(command: Command, quiet: bool) -> anyhow::Result<String> {
-    Ok(match command {
-        Command::Demo { out, frames, force } => {
-            let phantom = PhantomOptions {
-                frames,
-                ..Default::default()
-            };
-            let build = BuildOptions {
-                quiet,
-                ..Default::default()
-            };
-            let d = run_demo(&out, &phantom, &build, force)
-                .with_context(|| format!("demo {}", out.display()))?;
-            d.to_text()
+    match command {
+        Command::Demo(a) => demo(a, quiet),
+        Command::Build(a) => build(a, quiet),
+        Command::Segment(a) => segment(a),
+        Command::Inspect(a) => inspect(a, quiet),
+        Command::Phantom(a) => phantom(a),
+        Command::Render(a) => render(a),
+        Command::Flythrough(a) => fly(a, quiet),
+        Command::Evaluate(a) => evaluate(a),
+    }
+}
+
+fn demo(a: DemoArgs, quiet: bool) -> anyhow::Result<String> {
+    let phantom = PhantomOptions {
+        frames: a.frames,
+        ..Default::default()
+    };
+    let build = BuildOptions {
+        quiet,
+        ..Default::default()
+    };
+    let d = run_demo(&a.out, &phantom, &build, a.force)
+        .with_context(|| format!("demo {}", a.out.display()))?;
+    Ok(d.to_text())
+}
+
+fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
+    if a.fusion == FusionKind::Average && a.fusion_weight_exponent < 1.0 {
+        anyhow::bail!(
+            "--fusion-weight-exponent {}: expected 1 or more",
+            a.fusion_weight_exponent
+        );
+    }
+    let mut opts = BuildOptions {
+        force: a.force,
+        truth: a.truth,
+        cross_validate_every: a.cross_validate_every,
+        shading: a.shading,
+        quiet,
+        refine_light: a.light_refits,
+        chroma_refits: a.chroma_refits,
+        ..Default::default()
+    };
+    opts.atlas.texel_mm = a.texel_mm;
+    opts.segment.mesh.decimate.target_edge_mm = a.edge_mm;
+    opts.calibrated.ambient = a.ambient;
+    opts.calibrated.interreflection = !a.no_interreflection;
+    opts.fusion.method = FusionMethod::of_kind(a.fusion, a.fusion_weight_exponent);
+    let m = build_model(&a.case, &a.out, &opts)
+        .with_context(|| format!("build {}", a.case.display()))?;
+    for w in &m.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(build_text(&a.out, &m))
+}
+
+fn segment(a: SegmentArgs) -> anyhow::Result<String> {
+    let mut opts = SegmentCommandOptions {
+        force: a.force,
+        ..Default::default()
+    };
+    opts.segment.seed_world = a.seed.map(|[x, y, z]| Point3::new(x, y, z));
+    let growth = &mut opts.segment.growth;
+    (growth.start_hu, growth.max_hu, growth.step_hu) = (a.start_hu, a.max_hu, a.step_hu);
+    growth.leak_growth_limit = a.leak_growth_limit;
+    opts.segment.closing_radius_mm = a.closing_mm;
+    opts.mesh.iso_hu = a.iso_hu;
+    opts.mesh.decimate.target_edge_mm = a.edge_mm;
+    let out = a.out.unwrap_or_else(|| default_segment_out(&a.input));
+    let summary = segment_command(&a.input, &out, &opts)
+        .with_context(|| format!("segment {}", a.input.display()))?;
+    Ok(summary.to_text(&out))
+}
+
+fn inspect(a: InspectArgs, quiet: bool) -> anyhow::Result<String> {
+    let opts = InspectOptions {
+        decode_all_frames: !a.quick,
+    };
+    let report =
+        inspect_case(&a.case, &opts).with_context(|| format!("inspect {}", a.case.display()))?;
+    if !quiet {
+        for w in &report.warnings {
+            eprintln!("warning: {w}");
         }
-        Command::Build {
-            case,
-            out,
-            texel_mm,
-            edge_mm,
-            fusion,
-            fusion_weight_exponent,
-            shading,
-            cross_validate_every,
-            ambient,
-            no_interreflection,
-            light_refits,
-            chroma_refits,
-            truth,
-            force,
-        } => {
-            if fusion == FusionKind::Average && fusion_weight_exponent < 1.0 {
-                anyhow::bail!(
-                    "--fusion-weight-exponent {fusion_weight_exponent}: expected 1 or more"
-                );
-            }
-            let mut opts = BuildOptions {
-                force,
-                truth,
-                cross_validate_every,
-                shading,
-                quiet,
-                refine_light: light_refits,
-                chroma_refits,
-                ..Default::default()
-            };
-            opts.atlas.texel_mm = texel_mm;
-            opts.segment.mesh.decimate.target_edge_mm = edge_mm;
-            opts.calibrated.ambient = ambient;
-            opts.calibrated.interreflection = !no_interreflection;
-            opts.fusion.method = FusionMethod::of_kind(fusion, fusion_weight_exponent);
-            let m = build_model(&case, &out, &opts)
-                .with_context(|| format!("build {}", case.display()))?;
-            for w in &m.warnings {
-                eprintln!("warning: {w}");
-            }
-            build_text(&out, &m)
-        }
-        Command::Segment {
-            input,
-            out,
-            seed,
-            start_hu,
-            max_hu,
-            step_hu,
-            leak_growth_limit,
-            closing_mm,
-            iso_hu,
-            edge_mm,
-            force,
-        } => {
-            let mut opts = SegmentCommandOptions {
-                force,
-                ..Default::default()
-            };
-            opts.segment.seed_world = seed.map(|[x, y, z]| Point3::new(x, y, z));
-            let growth = &mut opts.segment.growth;
-            (growth.start_hu, growth.max_hu, growth.step_hu) = (start_hu, max_hu, step_hu);
-            growth.leak_growth_limit = leak_growth_limit;
-            opts.segment.closing_radius_mm = closing_mm;
-            opts.mesh.iso_hu = iso_hu;
-            opts.mesh.decimate.target_edge_mm = edge_mm;
-            let out = out.unwrap_or_else(|| default_segment_out(&input));
-            segment_command(&input, &out, &opts)
-                .with_context(|| format!("segment {}", input.display()))?
-                .to_text(&out)
-        }
-        Command::Inspect { case, json, quick } => {
-            let opts = InspectOptions {
-                decode_all_frames: !quick,
-            };
-            let report = inspect_case(&case, &opts)
-                .with_context(|| format!("inspect {}", case.display()))?;
-            for w in report.warnings.iter().filter(|_| !quiet) {
-                eprintln!("warning: {w}");
-            }
-            // The summary is the command's output: printed even with --quiet.
-            let text = match json {
-                true => serde_json::to_string_pretty(&report)? + "\n",
-                false => report.to_text(),
-            };
-            print!("{text}");
-            String::new()
-        }
-        Command::Phantom {
-            out,
-            frames,
-            size,
-            seed,
-            anatomy,
-            downsample,
-            supersample,
-            force,
-        } => {
-            let mut opts = PhantomOptions {
-                frames,
-                seed,
-                anatomy,
-                supersample,
-                force,
-                ..Default::default()
-            };
-            (opts.width, opts.height) = size.unwrap_or((opts.width, opts.height));
-            opts.mask.downsample = downsample;
-            let t = std::time::Instant::now();
-            write_phantom_case(&out, &opts)
-                .with_context(|| format!("phantom {}", out.display()))?
-                .to_text(&out, t.elapsed().as_secs_f64())
-        }
-        Command::Render {
-            model,
-            views,
-            camera,
-            out,
-            shading,
-            k,
-            supersample,
-            albedo_only,
-            force,
-        } => {
-            let opts = RenderCommandOptions {
-                camera,
-                render: RenderOptions {
-                    psi_lookup: PsiLookup::of_kind(shading, k),
-                    supersample: supersample.max(1),
-                    albedo_only,
-                    ..Default::default()
-                },
-                force,
-            };
-            render_command(&model, &views, &out, &opts)
-                .with_context(|| format!("render {}", model.display()))?
-                .to_text(&out)
-        }
-        Command::Flythrough {
-            model,
-            out,
-            frames,
-            fps,
-            force,
-        } => {
-            let opts = FlythroughOptions {
-                frames,
-                fps,
-                force,
-                quiet,
-                ..Default::default()
-            };
-            flythrough(&model, &out, &opts)
-                .with_context(|| format!("flythrough {}", model.display()))?
-                .to_text()
-        }
-        Command::Evaluate {
-            rendered,
-            truth,
-            baselines,
-            case,
-            json,
-        } => {
-            let scores = match &baselines {
-                Some(model) => evaluate_with_baselines(&rendered, &truth, model, case.as_deref()),
-                None => evaluate_folders(&rendered, &truth, Vec::new()),
-            }
-            .with_context(|| format!("evaluate {}", rendered.display()))?;
-            // The scores are the command's output: printed even with --quiet.
-            print!(
-                "{}",
-                match json {
-                    true => serde_json::to_string_pretty(&scores)? + "\n",
-                    false => scores_text(&scores),
-                }
-            );
-            String::new()
-        }
-    })
+    }
+    // The summary is the command's output: printed even with --quiet.
+    match a.json {
+        true => println!("{}", serde_json::to_string_pretty(&report)?),
+        false => print!("{}", report.to_text()),
+    }
+    Ok(String::new())
+}
+
+fn phantom(a: PhantomArgs) -> anyhow::Result<String> {
+    let mut opts = PhantomOptions {
+        frames: a.frames,
+        seed: a.seed,
+        anatomy: a.anatomy,
+        supersample: a.supersample,
+        force: a.force,
+        ..Default::default()
+    };
+    (opts.width, opts.height) = a.size.unwrap_or((opts.width, opts.height));
+    opts.mask.downsample = a.downsample;
+    let t = std::time::Instant::now();
+    let summary = write_phantom_case(&a.out, &opts)
+        .with_context(|| format!("phantom {}", a.out.display()))?;
+    Ok(summary.to_text(&a.out, t.elapsed().as_secs_f64()))
+}
+
+fn render(a: RenderArgs) -> anyhow::Result<String> {
+    let opts = RenderCommandOptions {
+        camera: a.camera,
+        render: RenderOptions {
+            psi_lookup: PsiLookup::of_kind(a.shading, a.k),
+            supersample: a.supersample.max(1),
+            albedo_only: a.albedo_only,
+            ..Default::default()
+        },
+        force: a.force,
+    };
+    let summary = render_command(&a.model, &a.views, &a.out, &opts)
+        .with_context(|| format!("render {}", a.model.display()))?;
+    Ok(summary.to_text(&a.out))
+}
+
+fn fly(a: FlythroughArgs, quiet: bool) -> anyhow::Result<String> {
+    let opts = FlythroughOptions {
+        frames: a.frames,
+        fps: a.fps,
+        force: a.force,
+        quiet,
+        ..Default::default()
+    };
+    let summary = flythrough(&a.model, &a.out, &opts)
+        .with_context(|| format!("flythrough {}", a.model.display()))?;
+    Ok(summary.to_text())
+}
+
+fn evaluate(a: EvaluateArgs) -> anyhow::Result<String> {
+    let scores = match &a.baselines {
+        Some(model) => evaluate_with_baselines(&a.rendered, &a.truth, model, a.case.as_deref()),
+        None => evaluate_folders(&a.rendered, &a.truth, Vec::new()),
+    }
+    .with_context(|| format!("evaluate {}", a.rendered.display()))?;
+    // The scores are the command's output: printed even with --quiet.
+    match a.json {
+        true => println!("{}", serde_json::to_string_pretty(&scores)?),
+        false => print!("{}", scores_text(&scores)),
+    }
+    Ok(String::new())
 }
 
 fn main() -> ExitCode {

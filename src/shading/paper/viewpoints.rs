@@ -26,9 +26,9 @@ pub enum PsiLookup {
 /// The lookups by name (the command line's `render --shading`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum PsiLookupKind {
-    /// [`PsiLookup::Nearest`] (the paper).
+    /// The Psi of the nearest fitted viewpoint (the paper).
     Nearest,
-    /// [`PsiLookup::KNearest`].
+    /// The k nearest viewpoints' Psi blended continuously.
     Blend,
 }
 
