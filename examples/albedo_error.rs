@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use bronchosim::model::Model;
-use bronchosim::workflow::albedo_truth::albedo_error;
+use bronchosim::phantom::analysis::albedo_error;
 
 fn main() -> bronchosim::Result<()> {
     let args: Vec<String> = std::env::args().collect();

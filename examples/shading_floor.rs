@@ -9,10 +9,10 @@ use std::path::Path;
 use bronchosim::io::case::Case;
 use bronchosim::io::mesh_export::read_ply;
 use bronchosim::model::Model;
-use bronchosim::raycast::Scene;
-use bronchosim::workflow::shading_truth::{
+use bronchosim::phantom::analysis::shading::{
     shading_residuals, spread, ShadingLaw, ShadingResiduals,
 };
+use bronchosim::raycast::Scene;
 
 fn main() -> bronchosim::Result<()> {
     let args: Vec<String> = std::env::args().collect();

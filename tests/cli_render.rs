@@ -2,8 +2,8 @@
 //! `render` writes the truth views from the model folder, `evaluate --baselines` scores them
 //! next to the paper's method and the two baselines on the same pixels.
 
-use bronchosim::workflow::albedo_truth::albedo_error;
-use bronchosim::workflow::shading_truth::{shading_residuals, spread, ShadingLaw};
+use bronchosim::phantom::analysis::albedo_error;
+use bronchosim::phantom::analysis::shading::{shading_residuals, spread, ShadingLaw};
 use std::path::Path;
 
 #[path = "common/cli.rs"]

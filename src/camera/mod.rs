@@ -5,10 +5,14 @@
 //! cv2.initUndistortRectifyMap); tests/camera_opencv.rs pins the agreement to 1e-3 px.
 
 pub mod pose;
+mod remap;
+mod remap_plan;
 mod undistort;
 
 pub use pose::Pose;
-pub use undistort::{remap_bilinear, RemapPlan, UndistortMap};
+pub use remap::remap_bilinear;
+pub use remap_plan::RemapPlan;
+pub use undistort::UndistortMap;
 
 use crate::math::{Matrix3, Point2, Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};

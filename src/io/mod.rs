@@ -2,6 +2,7 @@
 
 pub mod atomic;
 pub mod camera_file;
+mod camera_opencv;
 pub mod case;
 pub mod ct;
 pub mod dicom;

@@ -3,7 +3,9 @@
 //! frame renderer and the case writer (`bronchosim phantom`).
 
 pub mod albedo;
+pub mod analysis;
 pub mod anatomy;
+pub mod branch;
 pub mod case;
 pub mod ct_volume;
 pub mod from_mask;

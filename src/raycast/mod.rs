@@ -11,6 +11,7 @@ mod bvh;
 mod bvh_build;
 mod gbuffer;
 mod packet;
+mod packet_avx;
 mod scene;
 pub mod triangle;
 

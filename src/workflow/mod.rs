@@ -1,7 +1,6 @@
 //! The commands a person runs, each a whole job from input folder to output folder:
 //! they chain the stages and write results atomically. `main.rs` only parses and calls these.
 
-pub mod albedo_truth;
 pub mod build;
 pub mod demo;
 pub mod flythrough;
@@ -10,6 +9,5 @@ pub mod progress;
 pub mod render;
 pub mod report;
 pub mod segment;
-pub mod shading_truth;
 pub mod summary;
 pub mod truth_eval;

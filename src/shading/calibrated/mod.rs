@@ -14,6 +14,7 @@ mod moments;
 pub mod plots;
 pub mod predict;
 pub mod samples;
+mod solver;
 
 pub use chroma_albedo::refit_with_chroma_albedo;
 pub use fit::{
