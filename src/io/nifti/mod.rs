@@ -5,7 +5,10 @@
 //! by this module straight into the output array, chunk by chunk, so a 200 MB int16 CT is never
 //! held twice in memory.
 
+mod voxels;
 mod write;
+
+use voxels::read_voxels;
 
 pub use write::{write_nifti, NiftiVoxel};
 
@@ -261,7 +264,12 @@ pub fn read_nifti_stream<R: Read>(
 }
 
 /// Fill `buf` from `input`, turning a short read into a "truncated" error naming `what`.
-fn read_full<R: Read>(input: &mut R, buf: &mut [u8], path: &Path, what: &str) -> Result<()> {
+pub(super) fn read_full<R: Read>(
+    input: &mut R,
+    buf: &mut [u8],
+    path: &Path,
+    what: &str,
+) -> Result<()> {
     let mut got = 0;
     while got < buf.len() {
         match input.read(&mut buf[got..]) {
@@ -435,83 +443,4 @@ fn qform_affine(hdr: &NiftiHeader) -> Affine {
     m[(1, 3)] = hdr.quatern_y as f64;
     m[(2, 3)] = hdr.quatern_z as f64;
     m
-}
-
-/// Stream `nvox` voxels of `vtype` into an f32 vector, converting and scaling chunk by chunk.
-fn read_voxels<R: Read>(
-    input: &mut R,
-    nvox: usize,
-    vtype: VoxelType,
-    swap: bool,
-    slope: f32,
-    inter: f32,
-    path: &Path,
-) -> Result<Vec<f32>> {
-    let size = vtype.size();
-    let mut out = vec![0f32; nvox];
-    const CHUNK_VOXELS: usize = 1 << 20;
-    let mut buf = vec![0u8; CHUNK_VOXELS * size];
-    let mut done = 0;
-    while done < nvox {
-        let n = (nvox - done).min(CHUNK_VOXELS);
-        let bytes = &mut buf[..n * size];
-        read_full(input, bytes, path, "the voxel data").map_err(|e| match e {
-            Error::Invalid { message, .. } if message.starts_with("truncated") => Error::invalid(
-                path,
-                format!("truncated: voxel data ends after {done}+ of {nvox} voxels"),
-            ),
-            other => other,
-        })?;
-        convert_chunk(bytes, &mut out[done..done + n], vtype, swap, slope, inter);
-        done += n;
-    }
-    Ok(out)
-}
-
-/// Decode one chunk of raw voxels (any byte order) into scaled f32.
-fn convert_chunk(
-    bytes: &[u8],
-    out: &mut [f32],
-    vtype: VoxelType,
-    swap: bool,
-    slope: f32,
-    inter: f32,
-) {
-    macro_rules! conv {
-        ($t:ty, $n:expr) => {
-            for (o, b) in out.iter_mut().zip(bytes.chunks_exact($n)) {
-                let mut a = [0u8; $n];
-                a.copy_from_slice(b);
-                if swap {
-                    a.reverse();
-                }
-                *o = <$t>::from_ne_bytes(a) as f32 * slope + inter;
-            }
-        };
-    }
-    match vtype {
-        VoxelType::U8 => out
-            .iter_mut()
-            .zip(bytes)
-            .for_each(|(o, &b)| *o = b as f32 * slope + inter),
-        VoxelType::I8 => out
-            .iter_mut()
-            .zip(bytes)
-            .for_each(|(o, &b)| *o = b as i8 as f32 * slope + inter),
-        VoxelType::I16 => conv!(i16, 2),
-        VoxelType::U16 => conv!(u16, 2),
-        VoxelType::I32 => conv!(i32, 4),
-        VoxelType::U32 => conv!(u32, 4),
-        VoxelType::F32 => conv!(f32, 4),
-        VoxelType::F64 => {
-            for (o, b) in out.iter_mut().zip(bytes.chunks_exact(8)) {
-                let mut a = [0u8; 8];
-                a.copy_from_slice(b);
-                if swap {
-                    a.reverse();
-                }
-                *o = (f64::from_ne_bytes(a) * slope as f64 + inter as f64) as f32;
-            }
-        }
-    }
 }

@@ -3,6 +3,9 @@
 //! Levenberg–Marquardt polish over every parameter; bounds keep gains and ambient terms
 //! positive and, in the constrained refit, every Bernstein coefficient.
 
+#![allow(clippy::needless_range_loop)]
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use super::fit::{CalibratedOptions, CalibratedReport};
 use super::moments::{cost, normal_equations, FrameMoments, Layout};
 use crate::shading::bernstein::bernstein_eval;
