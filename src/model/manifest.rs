@@ -175,6 +175,10 @@ pub struct ModelCounts {
     pub charts: usize,
     /// Segmented airway volume (ml).
     pub airway_volume_ml: f64,
+    /// Airway branches the segmentation found (as `segment` counts them); absent in model
+    /// folders written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub branches: Option<usize>,
 }
 
 /// shading.json: both shading models; `model` names the one the texture was de-lit with and

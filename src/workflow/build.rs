@@ -511,6 +511,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
             covered_texels: tex.covered_texels,
             charts: atlas.chart_count,
             airway_volume_ml: seg.volume_ml,
+            branches: Some(seg.branch_count),
         },
         timings: timings.clone(),
         fit_quality: fits,
