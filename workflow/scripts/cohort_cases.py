@@ -22,7 +22,7 @@ FAILURE_RECORD = "failed.json"
 def discover(cases_dir: Path) -> list:
     """Names of the case folders under `cases_dir`, sorted."""
     if not cases_dir.is_dir():
-        raise SystemExit(f"error: cases={cases_dir}: not a folder")
+        raise ValueError(f"cases={cases_dir}: not a folder")
     return sorted(p.name for p in cases_dir.iterdir() if p.is_dir() and not p.name.startswith("."))
 
 

@@ -8,7 +8,8 @@ The command's stderr goes to the log. On success its stdout (with --stdout) is m
 place atomically and any failure record of the case is removed. On failure the case's
 failure record DIR/failed.json is written atomically (stage, the one-line error, exit status,
 fingerprint) and the command's exit status is returned, so Snakemake sees the job fail, keeps
-the log, deletes nothing that looks done, and the cohort summary finds the error.
+the log, deletes nothing that looks done, and the cohort summary finds the error. A command
+stopped from outside (SIGINT, SIGTERM, SIGHUP) leaves no record: that is not the case's failure.
 
 The failure record is not a rule output: Snakemake never takes a failed case for done. The
 Snakefile reads it only to leave an unchanged failed case alone on the next run.
@@ -26,6 +27,7 @@ import time
 from pathlib import Path
 
 FAILURE_RECORD = "failed.json"
+INTERRUPTS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
 
 
 def write_atomic(path: Path, text: str) -> None:
@@ -135,6 +137,11 @@ def main() -> int:
 
     if stdout_tmp is not None:
         Path(stdout_tmp).unlink(missing_ok=True)
+    if -rc in INTERRUPTS:
+        # Stopped from outside (Ctrl-C, Snakemake or the scheduler cancelling): not the case's
+        # failure, so no record; the next run tries again.
+        print(f"{args.case_out.name}: {args.stage} interrupted", file=sys.stderr)
+        return 128 - rc
     failure = {
         "stage": args.stage,
         "error": error_line(args.log, rc),

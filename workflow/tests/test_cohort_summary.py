@@ -71,6 +71,13 @@ class StageWrapper(unittest.TestCase):
             self.assertEqual(r.returncode, 1)
             self.assertEqual(json.loads((case_out / "failed.json").read_text())["error"], "killed by signal SIGKILL")
 
+    def test_an_interrupted_command_leaves_no_failure_record(self):
+        with tempfile.TemporaryDirectory() as tmp:
+            case_out = Path(tmp) / "c"
+            r = stage(case_out, "sh", "-c", "kill -TERM $$")
+            self.assertEqual(r.returncode, 128 + 15)
+            self.assertFalse((case_out / "failed.json").exists())
+
 
 class FailureRecord(unittest.TestCase):
     def setUp(self):
