@@ -130,15 +130,17 @@ planned=$(grep -o 'case=[a-z0-9]*' "$work/run3.log" | sort -u | tr '\n' ' ')
 pass "after a change only the changed case and the fixed one are planned"
 rm "$work/cases/broken/ct.nii.gz"
 
-# The cluster profile: a dry run plans every stage with its SLURM resources.
+# The cluster profile: a dry run plans every stage with its SLURM resources (a dry run caps
+# threads at --cores, 1 by default; 64 stands for the cluster's nodes).
 rm -rf "$work/out/p1"
-snakemake -s workflow/Snakefile --profile workflow/profiles/slurm --dry-run \
+snakemake -s workflow/Snakefile --profile workflow/profiles/slurm --dry-run --cores 64 \
   --config "${config[@]}" >"$work/slurm.log" 2>&1 || { tail -n 20 "$work/slurm.log"; fail "SLURM profile dry run"; }
 for rule in inspect build render flythrough; do
   grep -q "rule $rule:" "$work/slurm.log" || fail "SLURM dry run has no $rule job"
 done
-grep -q "mem_mb=" "$work/slurm.log" || fail "SLURM dry run shows no memory request"
-pass "SLURM profile dry run plans inspect, build, render and flythrough with memory requests"
+grep -q "stage build .*--threads 8 " "$work/slurm.log" || fail "SLURM dry run: build without the profile's 8 threads"
+grep -q "mem_mb=1500, .*runtime=30" "$work/slurm.log" || fail "SLURM dry run: flythrough without the profile's memory"
+pass "SLURM profile dry run plans inspect, build, render and flythrough with the profile's threads and memory"
 
 echo "cohort test: $((SECONDS - started)) s"
 echo "cohort: $passed passed, 0 failed"
