@@ -3,7 +3,7 @@
 against bronchosim's read_dicom_series (criterion bench `dicom_read`), in one run; prints ratios.
 
 The series is written once into /tmp/bronchosim_bench_dicom (about 80 MB raw + RLE).
-Run from the repository root: /work/venv/bin/python bench/dicom_read.py
+Run: bench/.venv/bin/python bench/dicom_read.py (all comparisons, venv included: bash bench/run_all.sh)
 """
 
 import json
@@ -16,6 +16,8 @@ import pydicom
 import SimpleITK as sitk
 from pydicom.dataset import Dataset, FileMetaDataset
 from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, RLELossless, generate_uid
+
+import cargo_target
 
 ROOT = "/tmp/bronchosim_bench_dicom"
 N, NZ = 512, 160
@@ -72,9 +74,9 @@ def main():
     write_series(raw, False)
     write_series(rle, True)
     env = dict(os.environ, BRONCHOSIM_DICOM_BENCH_DIR=raw, BRONCHOSIM_DICOM_BENCH_RLE_DIR=rle)
-    subprocess.run(["cargo", "bench", "--bench", "dicom_read", "--", "--noplot"], check=True, env=env)
-    target = json.loads(subprocess.run(["cargo", "metadata", "--format-version", "1", "--no-deps"],
-                                       capture_output=True, check=True, text=True).stdout)["target_directory"]
+    subprocess.run(["cargo", "bench", "--bench", "dicom_read", "--", "--noplot"], check=True, env=env,
+                   cwd=cargo_target.ROOT)
+    target = cargo_target.target_dir()
     for label, folder in [("raw", raw), ("rle", rle)]:
         est = json.load(open(os.path.join(target, "criterion", "dicom_read", label, "new", "estimates.json")))
         ours = est["median"]["point_estimate"] / 1e9

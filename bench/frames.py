@@ -4,7 +4,7 @@
 Makes the inputs (320x320 8- and 16-bit PNG, a 300-frame 320x320 H.264 mp4), times OpenCV
 decoding them to linear float32 RGB (the same work bronchosim does: decode + sRGB->linear
 LUT), then runs `cargo bench --bench frames` on the same files and prints ours / OpenCV.
-Run from the repository root:  /work/venv/bin/python bench/frames.py
+Run: bench/.venv/bin/python bench/frames.py (all comparisons, venv included: bash bench/run_all.sh)
 """
 import os
 import re
@@ -15,6 +15,8 @@ import time
 
 import cv2
 import numpy as np
+
+import cargo_target
 
 W = H = 320
 N_VIDEO = 300
@@ -105,7 +107,7 @@ def main():
     }
     env = dict(os.environ, BRONCHOSIM_BENCH_DIR=tmp)
     out = subprocess.run(["cargo", "bench", "--bench", "frames", "--", "--noplot"],
-                         env=env, capture_output=True, text=True)
+                         env=env, capture_output=True, text=True, cwd=cargo_target.ROOT)
     if out.returncode != 0:
         sys.exit(out.stderr[-3000:])
     units = {"ns": 1e-9, "µs": 1e-6, "us": 1e-6, "ms": 1e-3, "s": 1.0}

@@ -4,7 +4,8 @@ One run: generates (or reuses) the volume as raw float32 (x fastest) under --dir
 VTK's vtkFlyingEdges3D, skimage.measure.marching_cubes(method='lorensen') and bronchosim's
 marching cubes (release example `mc_timing`, best of 3 in-process runs), and prints ratios and
 bronchosim's peak memory relative to the volume's size.
-Run: /work/venv/bin/python bench/marching_cubes_vs_vtk.py [--dir /tmp/bronchosim_bench]
+Run: bench/.venv/bin/python bench/marching_cubes_vs_vtk.py [--dir /tmp/bronchosim_bench]
+(all comparisons, venv included: bash bench/run_all.sh)
 """
 import argparse
 import json
@@ -15,10 +16,11 @@ import time
 
 import numpy as np
 
+import cargo_target
+
 NX, NY, NZ = 512, 512, 400
 SPACING = (0.7, 0.7, 0.8)  # mm, x y z
 ISO = -500.0
-ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
 def tree_segments():
@@ -92,9 +94,7 @@ def main():
     print(f"volume {NX}x{NY}x{NZ} float32 = {vol.nbytes / 1e6:.0f} MB, iso {ISO}, cpus {os.cpu_count()}")
 
     # bronchosim (release build of the example; built before timing).
-    subprocess.run(["cargo", "build", "--release", "--example", "mc_timing", "-q"], cwd=ROOT, check=True)
-    target = pathlib.Path(os.environ.get("CARGO_TARGET_DIR", "/work/target"))
-    exe = target / "release/examples/mc_timing"
+    (exe,) = cargo_target.example("mc_timing")
     cmd = ["/usr/bin/time", "-v", str(exe), str(path), str(NX), str(NY), str(NZ), *map(str, SPACING), str(ISO), "3"]
     p = subprocess.run(cmd, capture_output=True, text=True, check=True)
     ours = json.loads(p.stdout.strip().splitlines()[-1])

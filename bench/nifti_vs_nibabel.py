@@ -1,7 +1,8 @@
 """NIfTI load speed: bronchosim's reader against nibabel on the same 512x512x400 int16 .nii.gz.
 
 Both are timed in this one run (the machine is shared and noisy; only the ratio means much).
-Usage: /work/venv/bin/python bench/nifti_vs_nibabel.py [--size 512,512,400] [--repeats 3]
+Usage: bench/.venv/bin/python bench/nifti_vs_nibabel.py [--size 512,512,400] [--repeats 3]
+(all comparisons, venv included: bash bench/run_all.sh)
 """
 import argparse
 import os
@@ -12,7 +13,8 @@ import time
 import nibabel as nib
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+import cargo_target
+
 
 
 def ct_like(shape, seed=0):
@@ -36,10 +38,7 @@ def main():
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
     shape = tuple(int(v) for v in args.size.split(","))
-    subprocess.run(["cargo", "build", "--release", "--example", "nifti_load_timing"], cwd=ROOT, check=True)
-    exe = os.path.join(os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target")), "release", "examples", "nifti_load_timing")
-    if not os.path.exists(exe):
-        exe = "/work/target/release/examples/nifti_load_timing"
+    (exe,) = cargo_target.example("nifti_load_timing")
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "ct.nii.gz")
         aff = np.diag([-0.7, -0.7, 0.8, 1.0])

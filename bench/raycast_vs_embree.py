@@ -16,8 +16,8 @@ Ours is timed by `examples/raycast_throughput.rs` with RAYON_NUM_THREADS=1 and 2
 On a shared machine wall-clock figures swing with other load; the second table divides by
 CPU seconds instead (embreex: process_time; ours: summed per-thread schedstat), 1 thread.
 
-Usage: /work/venv/bin/python bench/raycast_vs_embree.py [--repeats 5]
-Needs: pip install trimesh embreex (into /work/venv).
+Usage: bench/.venv/bin/python bench/raycast_vs_embree.py [--repeats 5]
+(all comparisons, venv included: bash bench/run_all.sh; trimesh and embreex are in bench/requirements.txt)
 """
 
 import argparse
@@ -34,17 +34,13 @@ import trimesh
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
+import cargo_target
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def cargo_example(name, args, env=None):
-    subprocess.run(
-        ["cargo", "build", "--release", "--quiet", "--example", name],
-        cwd=ROOT,
-        check=True,
-    )
-    target = Path(os.environ.get("CARGO_TARGET_DIR", "/work/target"))
-    exe = target / "release" / "examples" / name
+    (exe,) = cargo_target.example(name)
     out = subprocess.run(
         [str(exe), *args], cwd=ROOT, check=True, capture_output=True, text=True,
         env={**os.environ, **(env or {})},

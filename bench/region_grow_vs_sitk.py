@@ -4,7 +4,8 @@ One run: builds the examples in release, writes the phantom (raw int16 + JSON he
 present, times SimpleITK (6-connected, same seed and threshold) and ours in the same run,
 checks both masks have the same voxel count, and prints the ratio and our peak memory.
 
-Usage: python bench/region_grow_vs_sitk.py [WORKDIR]  (default /tmp/bronchosim_bench)
+Usage: bench/.venv/bin/python bench/region_grow_vs_sitk.py [WORKDIR]  (default /tmp/bronchosim_bench)
+(all comparisons, venv included: bash bench/run_all.sh)
 """
 import json
 import os
@@ -16,15 +17,15 @@ import time
 import numpy as np
 import SimpleITK as sitk
 
-root = pathlib.Path(__file__).resolve().parents[1]
+import cargo_target
+
 work = pathlib.Path(sys.argv[1] if len(sys.argv) > 1 else "/tmp/bronchosim_bench")
 work.mkdir(parents=True, exist_ok=True)
 prefix = work / "phantom_512"
 upper = -500
-subprocess.run(["cargo", "build", "--release", "--example", "phantom_ct_raw", "--example", "region_grow_timing"], cwd=root, check=True)
-target = pathlib.Path(os.environ.get("CARGO_TARGET_DIR", "/work/target")) / "release" / "examples"
+phantom_ct_raw, region_grow_timing = cargo_target.example("phantom_ct_raw", "region_grow_timing")
 if not (prefix.with_suffix(".raw")).exists():
-    subprocess.run([target / "phantom_ct_raw", prefix, "512", "512", "400"], check=True)
+    subprocess.run([phantom_ct_raw, prefix, "512", "512", "400"], check=True)
 h = json.loads(prefix.with_suffix(".json").read_text())
 nx, ny, nz = h["dims"]
 arr = np.fromfile(prefix.with_suffix(".raw"), dtype="<i2").reshape(nz, ny, nx)
@@ -42,7 +43,7 @@ for _ in range(3):
     times.append(time.perf_counter() - t)
 sitk_s = min(times)
 sitk_voxels = int(sitk.GetArrayViewFromImage(out).sum())
-ours = [json.loads(subprocess.run([target / "region_grow_timing", prefix, str(upper)], check=True, capture_output=True, text=True).stdout) for _ in range(3)]
+ours = [json.loads(subprocess.run([region_grow_timing, prefix, str(upper)], check=True, capture_output=True, text=True).stdout) for _ in range(3)]
 best = min(ours, key=lambda o: o["grow_s"])
 print(f"grid {nx}x{ny}x{nz}, seed {seed}, upper {upper} HU, threads {os.cpu_count()}")
 print(f"SimpleITK ConnectedThreshold: {sitk_s:.3f} s  ({sitk_voxels} voxels)")

@@ -18,7 +18,8 @@ arithmetic. So everything is timed twice: with glibc's defaults, and with
 GLIBC_TUNABLES trim_threshold=1 GiB, mmap_threshold=32 MiB for both sides (the allocation pattern of a
 long-running pipeline, where maps and frames are reused).
 
-    /work/venv/bin/python bench/undistort_vs_opencv.py [REPS] [ROUNDS]
+    bench/.venv/bin/python bench/undistort_vs_opencv.py [REPS] [ROUNDS]
+(all comparisons, venv included: bash bench/run_all.sh)
 """
 import json
 import os
@@ -28,6 +29,8 @@ import time
 
 import cv2
 import numpy as np
+
+import cargo_target
 
 W, H = 1280, 1024
 K = np.array([[800.0, 0.0, 639.5], [0.0, 800.0, 511.5], [0.0, 0.0, 1.0]])
@@ -83,11 +86,7 @@ def main():
         return
     reps = int(sys.argv[1]) if len(sys.argv) > 1 else 20
     rounds = int(sys.argv[2]) if len(sys.argv) > 2 else 3
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    subprocess.run(["cargo", "build", "--release", "--quiet", "--example", "undistort_timing"], cwd=root, check=True)
-    meta = json.loads(subprocess.run(["cargo", "metadata", "--format-version", "1", "--no-deps"], cwd=root,
-                                     capture_output=True, text=True, check=True).stdout)
-    exe = os.path.join(meta["target_directory"], "release", "examples", "undistort_timing")
+    (exe,) = cargo_target.example("undistort_timing")
     cores = os.cpu_count()
     print(f"OpenCV {cv2.__version__}, {W}x{H} RGB f32, median of {reps} reps, best of {rounds} rounds, {cores} cores")
     names = (("map_ms", "initUndistortRectifyMap"), ("remap_ms", "remap INTER_LINEAR"),

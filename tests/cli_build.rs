@@ -27,6 +27,8 @@ fn phantom_then_build_writes_the_model_folder() {
         serde_json::from_str(&std::fs::read_to_string(model.join("model.json")).unwrap()).unwrap();
     assert_eq!(m["format_version"], 2);
     assert_eq!(m["counts"]["frames"], 8);
+    // The phantom's tree as `segment` counts it (tests/cli_segment.rs): the cohort table's column.
+    assert!(m["counts"]["branches"].as_u64().unwrap() >= 7);
     let covered = m["counts"]["covered_texels"].as_u64().unwrap();
     let chart = m["counts"]["chart_texels"].as_u64().unwrap();
     assert!(covered > 1000 && covered <= chart, "{covered} of {chart}");

@@ -174,6 +174,10 @@ pub struct ModelCounts {
     pub charts: usize,
     /// Segmented airway volume (ml).
     pub airway_volume_ml: f64,
+    /// Airway branches the segmentation found (as `segment` counts them); absent in model
+    /// folders written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub branches: Option<usize>,
 }
 
 /// `to` relative to the folder `from` ("../case"), when both are absolute and share a first

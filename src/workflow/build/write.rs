@@ -110,6 +110,7 @@ fn write_model_files(out_dir: &OutputDir, built: &BuiltModel) -> Result<ModelMan
             covered_texels: tex.covered_texels,
             charts: atlas.chart_count,
             airway_volume_ml: scene.segmentation.volume_ml,
+            branches: Some(scene.segmentation.branch_count),
         },
         timings: built.timings.clone(),
         fit_quality: fits.clone(),
