@@ -1,4 +1,6 @@
-//! The library's error type: every variant names the file (or field) and what is wrong.
+//! The library's error type. File errors name the file and what is wrong with it; every other
+//! layer has its own typed error (shading fits, geometry, images, the build), wrapped here, so
+//! that a message names what failed and a caller can match on what went wrong.
 
 use std::path::{Path, PathBuf};
 
@@ -24,7 +26,10 @@ pub enum Error {
     /// A required file or folder is missing.
     #[error("{path}: not found ({what})")]
     Missing { path: PathBuf, what: String },
-    /// An error that concerns no single file (bad parameters, inconsistent inputs).
+    /// A shading model that cannot be fitted or used as asked.
+    #[error(transparent)]
+    Shading(#[from] crate::shading::ShadingError),
+    /// An error that concerns no single file and no layer's typed error.
     #[error("{0}")]
     Other(String),
 }

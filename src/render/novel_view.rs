@@ -163,8 +163,7 @@ pub fn render_view_with(
     }
     let shade = inputs
         .shading
-        .view_shader(inputs.kind, camera_to_world, opts.psi_lookup)
-        .map_err(|e| Error::Other(format!("render: {e}")))?;
+        .view_shader(inputs.kind, camera_to_world, opts.psi_lookup)?;
     let m = camera_to_world;
     let org = [m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32];
     let rot: [[f32; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)] as f32));

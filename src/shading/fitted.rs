@@ -6,6 +6,7 @@ use std::sync::OnceLock;
 use serde::{Deserialize, Serialize};
 
 use super::calibrated::CalibratedModel;
+use super::error::ShadingError;
 use super::frame_shading::FrameShaders;
 use super::kind::ShadingKind;
 use super::paper::{BlendedPsi, PsiLookup, PsiModel, ViewpointIndex};
@@ -65,16 +66,15 @@ impl FittedShading {
             .get_or_init(|| ViewpointIndex::new(&self.viewpoints))
     }
 
-    /// The per-frame shading of model `kind` (what de-lighting divides by), or a message
-    /// saying why there is none.
-    pub fn frame_shaders(&self, kind: ShadingKind) -> Result<&dyn FrameShaders, String> {
+    /// The per-frame shading of model `kind` (what de-lighting divides by).
+    pub fn frame_shaders(&self, kind: ShadingKind) -> Result<&dyn FrameShaders, ShadingError> {
         match kind {
             ShadingKind::Paper if !self.viewpoints.is_empty() => Ok(&self.viewpoints),
             ShadingKind::Calibrated => match &self.calibrated {
                 Some(c) => Ok(c),
-                None => Err(missing(kind)),
+                None => Err(ShadingError::NotFitted(kind)),
             },
-            ShadingKind::Paper => Err(missing(kind)),
+            ShadingKind::Paper => Err(ShadingError::NotFitted(kind)),
         }
     }
 
@@ -85,7 +85,7 @@ impl FittedShading {
         kind: ShadingKind,
         camera_to_world: &Affine,
         lookup: PsiLookup,
-    ) -> Result<ViewShader<'_>, String> {
+    ) -> Result<ViewShader<'_>, ShadingError> {
         match kind {
             ShadingKind::Paper if !self.viewpoints.is_empty() => {
                 Ok(ViewShader::Paper(BlendedPsi::new(
@@ -100,9 +100,9 @@ impl FittedShading {
                     model,
                     ambient: model.new_view_ambient().map(|a| a as f32),
                 }),
-                None => Err(missing(kind)),
+                None => Err(ShadingError::NotFitted(kind)),
             },
-            ShadingKind::Paper => Err(missing(kind)),
+            ShadingKind::Paper => Err(ShadingError::NotFitted(kind)),
         }
     }
 
@@ -122,8 +122,4 @@ impl FittedShading {
         }
         Ok(())
     }
-}
-
-fn missing(kind: ShadingKind) -> String {
-    format!("the {kind} shading model was not fitted")
 }

@@ -21,6 +21,7 @@
 pub mod bernstein;
 pub mod calibrated;
 pub mod density;
+pub mod error;
 pub mod fitted;
 pub mod frame_shading;
 pub mod kind;
@@ -33,6 +34,7 @@ pub mod view_shading;
 
 pub use calibrated::CalibratedModel;
 pub use density::{density_weights, density_weights_nd, DensityWeights, WeightOptions};
+pub use error::ShadingError;
 pub use fitted::FittedShading;
 pub use frame_shading::{FrameShaders, FrameShading, Shade, LUMA};
 pub use kind::ShadingKind;

@@ -337,8 +337,7 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
         let read = |p: &Path| std::fs::read(p).map_err(|e| Error::io(p, e));
         let shading = inputs
             .shading
-            .frame_shaders(m.shading_model)
-            .map_err(Error::Other)?
+            .frame_shaders(m.shading_model)?
             .frame_shading(f.index);
         let (shade, tex) = shading_and_texture(f, shading, &cos_theta);
         let name = match shading {

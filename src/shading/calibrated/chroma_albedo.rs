@@ -32,7 +32,11 @@ use rayon::prelude::*;
 use super::fit::{fit_calibrated_with_albedo, CalibratedOptions};
 use super::model::CalibratedModel;
 use super::samples::PooledSamples;
-use crate::{Error, Result};
+use crate::shading::ShadingError;
+use crate::Result;
+
+/// The name errors give this fit.
+const FIT: &str = "chroma albedo";
 
 /// Huber constant of the regression's IRLS.
 const HUBER: f64 = 1.345;
@@ -120,10 +124,12 @@ impl ChromaAlbedo {
                 .filter(|v| v.is_finite())
                 .collect();
             if v.len() < 100 {
-                return Err(Error::Other(format!(
-                    "chroma albedo: {} samples with a colour",
-                    v.len()
-                )));
+                return Err(ShadingError::TooFewSamples {
+                    fit: FIT,
+                    got: v.len(),
+                    needed: 100,
+                }
+                .into());
             }
             let n = v.len();
             let lo = *v.select_nth_unstable_by(n / 100, f32::total_cmp).1;
@@ -199,7 +205,7 @@ impl ChromaAlbedo {
                 b = ata
                     .cholesky()
                     .map(|ch| ch.solve(&atb))
-                    .ok_or_else(|| Error::Other("chroma albedo: singular regression".into()))?;
+                    .ok_or(ShadingError::Singular { fit: FIT })?;
                 // Huber weights at the robust scale (the median absolute residual).
                 let abs_res: Vec<f64> = frames
                     .iter()
@@ -263,11 +269,13 @@ pub fn refit_with_chroma_albedo(
     opts: &CalibratedOptions,
 ) -> Result<ChromaAlbedo> {
     if density.len() != samples.len() {
-        return Err(Error::Other(format!(
-            "chroma albedo: {} weights for {} samples",
-            density.len(),
-            samples.len()
-        )));
+        return Err(ShadingError::LengthMismatch {
+            fit: FIT,
+            what: "weights",
+            got: density.len(),
+            expected: samples.len(),
+        }
+        .into());
     }
     let res = residuals(model, samples);
     let chroma = ChromaAlbedo::fit_residuals(&res, density, &samples.frame_start)?;

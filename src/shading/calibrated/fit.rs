@@ -28,8 +28,12 @@ use super::samples::PooledSamples;
 use super::solver::{bounds, clamp_to, min_positive, rho_scale, solve};
 use crate::shading::bernstein::bernstein_eval;
 use crate::shading::robust::Robust;
-use crate::{Error, Result};
+use crate::shading::ShadingError;
+use crate::Result;
 use rayon::prelude::*;
+
+/// The name errors give this fit.
+const FIT: &str = "calibrated fit";
 
 /// Options of [`fit_calibrated`].
 #[derive(Debug, Clone, PartialEq)]
@@ -146,11 +150,13 @@ pub fn fit_calibrated_with_albedo(
     opts: &CalibratedOptions,
 ) -> Result<CalibratedFit> {
     if albedo.iter().any(|a| a.len() != samples.len()) {
-        return Err(Error::Other(format!(
-            "calibrated fit: albedo for {} samples, expected {}",
-            albedo[0].len(),
-            samples.len()
-        )));
+        return Err(ShadingError::LengthMismatch {
+            fit: FIT,
+            what: "albedo values",
+            got: albedo[0].len(),
+            expected: samples.len(),
+        }
+        .into());
     }
     fit_inner(samples, density, Some(albedo), init, opts)
 }
@@ -162,46 +168,58 @@ fn check_inputs(samples: &PooledSamples, density: &[f32], opts: &CalibratedOptio
         + f * if opts.ambient { 4 } else { 1 }
         + if opts.interreflection { 3 } else { 0 };
     if opts.interreflection && samples.frame_light.len() != f {
-        return Err(Error::Other(format!(
-            "calibrated fit: inter-reflection needs each frame's mean light ({} for {f} frames)",
-            samples.frame_light.len()
-        )));
+        return Err(ShadingError::LengthMismatch {
+            fit: FIT,
+            what: "frames' mean light (the inter-reflection needs each frame's)",
+            got: samples.frame_light.len(),
+            expected: f,
+        }
+        .into());
     }
     if samples.len() < need {
-        return Err(Error::Other(format!(
-            "calibrated fit: {} samples for {need} parameters",
-            samples.len()
-        )));
+        return Err(ShadingError::TooFewSamples {
+            fit: FIT,
+            got: samples.len(),
+            needed: need,
+        }
+        .into());
     }
     if opts.rho_degree > 9 || opts.s_degree > 9 {
-        return Err(Error::Other(format!(
-            "calibrated fit: degrees rho {} / s {} (at most 9)",
-            opts.rho_degree, opts.s_degree
-        )));
+        return Err(ShadingError::BadOptions {
+            fit: FIT,
+            message: format!(
+                "degrees rho {} / s {} (at most 9)",
+                opts.rho_degree, opts.s_degree
+            ),
+        }
+        .into());
     }
     if opts.reference_frame >= f {
-        return Err(Error::Other(format!(
-            "calibrated fit: reference frame {} of {f} frames",
-            opts.reference_frame
-        )));
+        return Err(ShadingError::BadOptions {
+            fit: FIT,
+            message: format!("reference frame {} of {f} frames", opts.reference_frame),
+        }
+        .into());
     }
     if density.len() != samples.len() {
-        return Err(Error::Other(format!(
-            "calibrated fit: {} weights for {} samples",
-            density.len(),
-            samples.len()
-        )));
+        return Err(ShadingError::LengthMismatch {
+            fit: FIT,
+            what: "weights",
+            got: density.len(),
+            expected: samples.len(),
+        }
+        .into());
     }
     if let Some(i) = density.iter().position(|w| !(w.is_finite() && *w >= 0.0)) {
-        return Err(Error::Other(format!(
-            "calibrated fit: weight {i} is {} (weights must be finite and >= 0)",
-            density[i]
-        )));
+        return Err(ShadingError::BadWeight {
+            fit: FIT,
+            index: i,
+            value: f64::from(density[i]),
+        }
+        .into());
     }
     if let Some(f) = (0..f).find(|&f| samples.frame_start[f] == samples.frame_start[f + 1]) {
-        return Err(Error::Other(format!(
-            "calibrated fit: frame {f} has no samples (its gain is undetermined)"
-        )));
+        return Err(ShadingError::FrameWithoutSamples { frame: f }.into());
     }
     Ok(())
 }
@@ -306,10 +324,12 @@ fn params_of(lay: &Layout, m: &CalibratedModel) -> Result<Vec<f64>> {
         || m.gains.len() != lay.frames
         || (lay.ambient && m.ambient.as_ref().is_none_or(|a| a.len() != lay.frames))
     {
-        return Err(Error::Other(
-            "calibrated fit: the initial model's degrees, frames or ambient terms differ from the options"
+        return Err(ShadingError::BadOptions {
+            fit: FIT,
+            message: "the initial model's degrees, frames or ambient terms differ from the options"
                 .into(),
-        ));
+        }
+        .into());
     }
     let mut p = vec![0.0; lay.len()];
     for c in 0..3 {

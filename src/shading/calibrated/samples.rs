@@ -11,8 +11,12 @@ use crate::rng::splitmix64;
 use crate::shading::density::{density_weights_nd, WeightOptions};
 use crate::shading::frame_shading::LUMA;
 use crate::shading::samples::{ExclusionCounts, SampleOptions};
-use crate::{Error, Result};
+use crate::shading::ShadingError;
+use crate::Result;
 use rayon::prelude::*;
+
+/// The name errors give this fit.
+const POOL: &str = "calibrated samples";
 
 /// One frame's per-pixel inputs (row-major, one entry per pixel unless said otherwise).
 #[derive(Debug, Clone, Copy)]
@@ -109,9 +113,11 @@ impl PooledSamples {
             self.frame_start.push(0);
         }
         if self.texel.is_some() != other.texel.is_some() && !self.is_empty() {
-            return Err(Error::Other(
-                "calibrated samples: appending frames with and without texel ids".into(),
-            ));
+            return Err(ShadingError::BadOptions {
+                fit: POOL,
+                message: "appending frames with and without texel ids".into(),
+            }
+            .into());
         }
         let base = self.frames() as u32;
         let offset = self.len();
@@ -151,19 +157,26 @@ pub fn pool_frames(frames: &[FrameData], opts: &PoolOptions) -> Result<PooledSam
     for (f, fr) in frames.iter().enumerate() {
         let n = fr.gamma.len();
         if fr.z.len() != n || fr.cos_theta.len() != n || fr.rgb.len() != 3 * n {
-            return Err(Error::Other(format!(
-                "calibrated samples: frame {f}: {n} gamma, {} z, {} cos_theta, {} rgb values \
-                 (expected n, n, n, 3n)",
-                fr.z.len(),
-                fr.cos_theta.len(),
-                fr.rgb.len()
-            )));
+            return Err(ShadingError::BadOptions {
+                fit: POOL,
+                message: format!(
+                    "frame {f}: {n} gamma, {} z, {} cos_theta, {} rgb values \
+                     (expected n, n, n, 3n)",
+                    fr.z.len(),
+                    fr.cos_theta.len(),
+                    fr.rgb.len()
+                ),
+            }
+            .into());
         }
         if fr.texel.is_some_and(|t| t.len() != n) {
-            return Err(Error::Other(format!(
-                "calibrated samples: frame {f}: texel ids for {} pixels, expected {n}",
-                fr.texel.map_or(0, |t| t.len())
-            )));
+            return Err(ShadingError::LengthMismatch {
+                fit: POOL,
+                what: "texel ids",
+                got: fr.texel.map_or(0, |t| t.len()),
+                expected: n,
+            }
+            .into());
         }
     }
     let with_texels = frames.iter().any(|f| f.texel.is_some());

@@ -23,10 +23,14 @@ use crate::shading::bernstein::eval3;
 use crate::shading::robust::Robust;
 use crate::shading::samples::SampleSet;
 use crate::shading::solve::{solve_box_fixed, solve_spd};
-use crate::{Error, Result};
+use crate::shading::ShadingError;
+use crate::Result;
 use nalgebra::SVector;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+
+/// The name errors give this fit.
+const FIT: &str = "shading fit";
 
 /// Options of [`fit_psi`].
 #[derive(Debug, Clone, PartialEq)]
@@ -100,27 +104,36 @@ pub struct PsiFit {
 pub fn fit_psi(samples: &SampleSet, weights: &[f32], opts: &FitOptions) -> Result<PsiFit> {
     let n = samples.len();
     if n < 7 {
-        return Err(Error::Other(format!(
-            "shading fit: {n} samples, at least 7 are needed for 7 parameters per channel"
-        )));
+        return Err(ShadingError::TooFewSamples {
+            fit: FIT,
+            got: n,
+            needed: 7,
+        }
+        .into());
     }
     if weights.len() != n {
-        return Err(Error::Other(format!(
-            "shading fit: {} weights for {n} samples",
-            weights.len()
-        )));
+        return Err(ShadingError::LengthMismatch {
+            fit: FIT,
+            what: "weights",
+            got: weights.len(),
+            expected: n,
+        }
+        .into());
     }
     if let Some(i) = weights.iter().position(|w| !(w.is_finite() && *w >= 0.0)) {
-        return Err(Error::Other(format!(
-            "shading fit: weight {i} is {} (weights must be finite and >= 0)",
-            weights[i]
-        )));
+        return Err(ShadingError::BadWeight {
+            fit: FIT,
+            index: i,
+            value: f64::from(weights[i]),
+        }
+        .into());
     }
     if !(samples.z_max > samples.z_min) {
-        return Err(Error::Other(format!(
-            "shading fit: empty depth range z_min {} .. z_max {} mm",
-            samples.z_min, samples.z_max
-        )));
+        return Err(ShadingError::EmptyDepthRange {
+            z_min: f64::from(samples.z_min),
+            z_max: f64::from(samples.z_max),
+        }
+        .into());
     }
     // r per sample once: the passes below read it many times.
     let r: Vec<f64> = (0..n).map(|i| samples.r(i)).collect();

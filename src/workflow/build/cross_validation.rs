@@ -60,7 +60,7 @@ pub fn cross_validate(
     let view_rays = ViewRays::new(&scene.case.camera, 1)?;
     let mut models = Vec::new();
     for kind in shading.kinds() {
-        let shaders = shading.frame_shaders(kind).map_err(Error::Other)?;
+        let shaders = shading.frame_shaders(kind)?;
         let mut stream = scene.frames(
             shaders,
             train.clone(),

@@ -7,7 +7,7 @@ use super::options::BuildOptions;
 use super::scene::BuildScene;
 use crate::shading::{FittedShading, ShadingKind};
 use crate::texture::fusion::fuse;
-use crate::{Error, Result};
+use crate::Result;
 
 /// One fused albedo atlas.
 pub struct FusedAlbedo {
@@ -67,7 +67,7 @@ fn fuse_albedo(
     opts: &BuildOptions,
     label: &str,
 ) -> Result<FusedAlbedo> {
-    let shaders = shading.frame_shaders(kind).map_err(Error::Other)?;
+    let shaders = shading.frame_shaders(kind)?;
     let n = scene.frame_count();
     let passes = opts.fusion.method.passes();
     let mut stream = scene.frames(shaders, (0..n).collect(), label, passes, opts.quiet);
