@@ -33,7 +33,10 @@ pub struct LumenMeshOptions {
     pub iso_hu: f32,
     /// How far (mm) beyond the segmentation's boundary the CT's iso-surface is followed; where
     /// the CT has no crossing that close (a wall thinner than a voxel), the surface is this
-    /// offset of the mask instead.
+    /// offset of the mask instead. 1 mm: on the phantom (0.7 mm voxels) no crossing lies
+    /// farther, so the band changes nothing there (0.5 mm would: mean distance to the truth
+    /// 0.044 -> 0.052 mm); on the real 1.5 mm CT of tests/data, 1.5 mm would put only 62% of
+    /// the surface within 1 mm of the segmentation (94.5% at 1 mm).
     pub band_mm: f64,
     /// Slope (HU/mm) of the band's ramp in the field, about the CT's own gradient across a
     /// wall; it only matters on voxel edges where the band and the CT meet.
