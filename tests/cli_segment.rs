@@ -117,3 +117,58 @@ fn segment_bad_input() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("X,Y,Z"));
 }
+
+/// A float CT with a 10x10x10 block of NaN (issue 17): `segment` ends in seconds, says how many
+/// voxels were not finite and that they count as tissue, and writes the same tree otherwise.
+#[test]
+fn segment_counts_nan_voxels_as_tissue() {
+    let ph = make_ct_phantom(&CtPhantomOptions::coarse()).unwrap();
+    let mut ct = ph.ct.clone();
+    // In the lung, beside the airway: the tree must not change.
+    let c = ph.tree.carina();
+    let at = ct
+        .voxel_at_world(bronchosim::math::Point3::new(c.x + 40.0, c.y, c.z - 10.0))
+        .unwrap();
+    for k in at[2] - 5..at[2] + 5 {
+        for j in at[1] - 5..at[1] + 5 {
+            for i in at[0] - 5..at[0] + 5 {
+                assert_eq!(ph.truth_mask.get(i, j, k), 0);
+                ct.set(i, j, k, f32::NAN);
+            }
+        }
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let clean_path = tmp.path().join("clean.nii.gz");
+    write_nifti(&clean_path, &ph.ct).unwrap();
+    let nan_path = tmp.path().join("nan.nii.gz");
+    write_nifti(&nan_path, &ct).unwrap();
+    let summary = |out: &std::path::Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+    };
+    let (clean_out, nan_out) = (tmp.path().join("clean"), tmp.path().join("nan"));
+    let o = segment(&[
+        clean_path.as_os_str(),
+        "--out".as_ref(),
+        clean_out.as_os_str(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t = std::time::Instant::now();
+    let o = segment(&[nan_path.as_os_str(), "--out".as_ref(), nan_out.as_os_str()]);
+    let seconds = t.elapsed().as_secs_f64();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(seconds < 30.0, "segment took {seconds:.1} s");
+    let text = String::from_utf8_lossy(&o.stdout);
+    let note = text.lines().find(|l| l.starts_with("note")).unwrap_or("");
+    assert!(
+        note.contains("nan.nii.gz")
+            && note.contains("1000 voxels are NaN")
+            && note.contains("tissue"),
+        "{text}"
+    );
+    let (a, b) = (summary(&clean_out), summary(&nan_out));
+    assert_eq!(b["non_finite_voxels"], 1000);
+    assert_eq!(a["non_finite_voxels"], 0);
+    for key in ["volume_ml", "threshold_hu", "seed_voxel", "branches"] {
+        assert_eq!(a[key], b[key], "{key}");
+    }
+}

@@ -414,7 +414,7 @@ fn lumen_pipeline_on_a_tube_phantom_meets_the_accuracy_bound() {
     let o = vol0.index_to_world(Point3::new(23.5, 21.5, 19.5));
     let d = Vector3::new(0.2, -0.3, 1.0).normalize();
     let r = 5.0;
-    // Lung-like parenchyma (−850 HU) beyond a 2 mm wall: without the region it would be meshed too.
+    // Lung-like parenchyma (−850 HU) beyond a 2 mm wall: it must not be meshed.
     let sdf = |p: &Point3<f64>| cyl_dist(p, &o, &d, r);
     let mut ct = ct_volume(dims, a, sdf, 25.0, 6);
     for k in 0..dims[2] {
@@ -428,11 +428,7 @@ fn lumen_pipeline_on_a_tube_phantom_meets_the_accuracy_bound() {
         }
     }
     let mask = airway_mask(&ct, sdf);
-    let opts = LumenMeshOptions {
-        region_dilation_mm: 1.5,
-        ..Default::default()
-    };
-    let (mesh, rep) = lumen_mesh(&ct, &mask, &opts).unwrap();
+    let (mesh, rep) = lumen_mesh(&ct, &mask, &LumenMeshOptions::default()).unwrap();
     let mean = mesh
         .positions
         .iter()

@@ -83,6 +83,11 @@ fn check_phantom(ph: &CtPhantom, name: &str) {
         mean_dist <= 0.25 * min_spacing,
         "{name}: mesh {mean_dist:.4} mm from the true surface"
     );
+    // And in absolute terms (0.044 mm when the lumen field was introduced, issue 17).
+    assert!(
+        mean_dist <= 0.06,
+        "{name}: mesh {mean_dist:.4} mm from the true surface"
+    );
     let sp = ph.ct.spacing();
     println!(
         "{name}: dims {:?} seed {:?} ({:.1}, {:.1}, {:.1}) threshold {} exploded {} volume {:.2} ml truth {:.2} ml branches {} (truth {})",

@@ -131,6 +131,38 @@ pub fn deviation(from: &TriMesh, to: &TriMesh) -> Deviation {
     }
 }
 
+/// For each distance in `dists_mm`, the fraction of `mesh`'s area lying within that distance
+/// (mm) of the surface of `to`, judged at triangle centroids (so triangles should be small
+/// next to the distances). All zeros when either mesh is empty.
+pub fn area_within(mesh: &TriMesh, to: &TriMesh, dists_mm: &[f64]) -> Vec<f64> {
+    let total = mesh.area();
+    if total <= 0.0 || to.triangles.is_empty() {
+        return vec![0.0; dists_mm.len()];
+    }
+    let grid = TriangleGrid::new(to);
+    let per: Vec<(f64, f64)> = (0..mesh.triangles.len())
+        .into_par_iter()
+        .map(|t| {
+            let [a, b, c] = mesh.triangles[t].map(|v| mesh.positions[v as usize].coords);
+            let centroid = Point3::from((a + b + c) / 3.0);
+            (
+                0.5 * mesh.face_normal(t).norm() as f64,
+                grid.distance(&centroid),
+            )
+        })
+        .collect();
+    dists_mm
+        .iter()
+        .map(|&d| {
+            per.iter()
+                .filter(|(_, x)| *x <= d)
+                .map(|(a, _)| a)
+                .sum::<f64>()
+                / total
+        })
+        .collect()
+}
+
 /// A uniform grid of triangle ids over a mesh's bounding box, for nearest-surface queries.
 pub struct TriangleGrid<'a> {
     mesh: &'a TriMesh,
@@ -210,13 +242,19 @@ impl<'a> TriangleGrid<'a> {
         }
     }
 
-    /// Distance (mm) from `p` to the nearest triangle.
+    /// Distance (mm) from `p` to the nearest triangle; NaN when `p` is not finite.
     pub fn distance(&self, p: &Point3<f32>) -> f64 {
         let q = p.coords.cast::<f64>();
-        let c = [0, 1, 2].map(|a| ((q[a] - self.lo[a]) / self.cell).floor() as i64);
+        if !q.iter().all(|v| v.is_finite()) {
+            return f64::NAN;
+        }
+        // Search rings around the grid cell nearest to p: for a point outside the grid, cells
+        // beyond ring r of that cell are still at least r cells away, so the stop rule holds.
+        let c = [0, 1, 2].map(|a| {
+            (((q[a] - self.lo[a]) / self.cell).floor() as i64).clamp(0, self.dims[a] as i64 - 1)
+        });
         let mut best = f64::INFINITY;
-        let max_ring = self.dims.iter().map(|&d| d as i64).max().unwrap_or(1)
-            + c.iter().map(|v| v.abs()).max().unwrap_or(0);
+        let max_ring = self.dims.iter().map(|&d| d as i64).max().unwrap_or(1);
         for r in 0..=max_ring {
             for z in c[2] - r..=c[2] + r {
                 for y in c[1] - r..=c[1] + r {
@@ -322,6 +360,28 @@ mod tests {
     }
 
     #[test]
+    fn area_within_counts_triangles_by_their_distance() {
+        // Two unit right triangles (area 0.5 each) at heights 0.5 and 3 above the tetrahedron's
+        // base face z = 0, beside it in x so the base face is nearest.
+        let base = tetra();
+        let flat = |z: f32| TriMesh {
+            positions: vec![
+                Point3::new(0.0, 0.0, z),
+                Point3::new(1.0, 0.0, z),
+                Point3::new(0.0, 1.0, z),
+            ],
+            triangles: vec![[0, 1, 2]],
+        };
+        let (lo, hi) = (flat(-0.5), flat(-3.0));
+        let mut both = lo.clone();
+        both.positions.extend(hi.positions);
+        both.triangles.push([3, 4, 5]);
+        let f = area_within(&both, &base, &[0.4, 0.6, 2.9, 3.1]);
+        assert_eq!(f, vec![0.0, 0.5, 0.5, 1.0]);
+        assert_eq!(area_within(&TriMesh::default(), &base, &[1.0]), vec![0.0]);
+    }
+
+    #[test]
     fn grid_distance_matches_brute_force() {
         let m = tetra();
         let grid = TriangleGrid::new(&m);
@@ -342,6 +402,23 @@ mod tests {
                 .fold(f64::INFINITY, f64::min);
             assert!((grid.distance(&p) - brute).abs() < 1e-9);
         }
+        // Far away and not-a-number queries end (a NaN vertex once made this loop for minutes).
+        let far = Point3::new(1e6f32, -2e6, 5e5);
+        let brute = m
+            .triangles
+            .iter()
+            .map(|t| {
+                point_triangle_distance(
+                    &far.coords.cast(),
+                    &t.map(|v| m.positions[v as usize].coords.cast::<f64>()),
+                )
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!((grid.distance(&far) - brute).abs() < 1e-6 * brute);
+        assert!(grid.distance(&Point3::new(f32::NAN, 0.0, 0.0)).is_nan());
+        assert!(grid
+            .distance(&Point3::new(f32::INFINITY, 0.0, 0.0))
+            .is_nan());
         // A point above the slanted face (1,1,1)/sqrt(3) at distance 1.
         let c = Vector3::new(1.0, 1.0, 1.0) / 3.0;
         let p = c + Vector3::new(1.0, 1.0, 1.0) / 3f64.sqrt();

@@ -1,7 +1,9 @@
 //! Triangle meshes: the lumen surface and what is done to it.
 
+pub mod components;
 pub mod decimate;
 pub mod lumen;
+pub mod lumen_field;
 pub mod metrics;
 pub mod smooth;
 mod trimesh;

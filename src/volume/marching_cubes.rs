@@ -383,6 +383,38 @@ mod tests {
     use super::*;
 
     #[test]
+    fn non_finite_and_huge_values_give_finite_vertices() {
+        // Seeded mix of air, tissue, NaN, ±inf and ±f32::MAX: every vertex stays finite and
+        // on its grid edge, and NaN never counts as air (a NaN-only grid has no surface).
+        let mut r = crate::phantom::rng::Pcg32::new(17, 5);
+        let pick = [
+            -1000.0,
+            40.0,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            -f32::MAX,
+        ];
+        let data: Vec<f32> = (0..9 * 8 * 7)
+            .map(|_| pick[(r.uniform() * pick.len() as f64) as usize % pick.len()])
+            .collect();
+        let v = Volume::from_data([9, 8, 7], Affine::identity(), data).unwrap();
+        let m = marching_cubes(&v, -500.0, None).unwrap();
+        assert!(!m.triangles.is_empty());
+        for p in &m.positions {
+            assert!(p.coords.iter().all(|c| c.is_finite()), "{p:?}");
+            let off_grid = [p.x, p.y, p.z].iter().filter(|c| c.fract() != 0.0).count();
+            assert!(off_grid <= 1, "{p:?} is not on a grid edge");
+        }
+        let nan = Volume::filled([4, 4, 4], Affine::identity(), f32::NAN);
+        assert!(marching_cubes(&nan, -500.0, None)
+            .unwrap()
+            .triangles
+            .is_empty());
+    }
+
+    #[test]
     fn single_low_corner_gives_one_inward_triangle() {
         let mut v = Volume::filled([2, 2, 2], Affine::identity(), 1.0f32);
         v.set(0, 0, 0, -1.0);

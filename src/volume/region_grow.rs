@@ -250,9 +250,14 @@ pub fn grow_adaptive(
         )));
     }
     if steps[chosen].voxels == 0 {
+        let v = vol.get(seed[0], seed[1], seed[2]);
+        let value = if v.is_finite() {
+            format!("{v} HU")
+        } else {
+            "not a finite number, counted as tissue".to_string()
+        };
         return Err(Error::Other(format!(
-            "region growing: seed {seed:?} ({} HU) is above every threshold up to {} HU",
-            vol.get(seed[0], seed[1], seed[2]),
+            "region growing: seed {seed:?} ({value}) is above every threshold up to {} HU",
             steps[chosen].hu
         )));
     }

@@ -8,8 +8,11 @@ use super::seed::{find_trachea_seed, SeedOptions};
 use super::Volume;
 use crate::math::{Point3, Vector4};
 use crate::{Error, Result};
+use rayon::prelude::*;
+use std::borrow::Cow;
 
 /// Options of [`segment_airway`]. The steps, in order:
+/// 0. non-finite voxels (NaN, ±inf) are read as +inf, i.e. tissue (see [`non_finite_as_tissue`]);
 /// 1. the seed: `seed_world` if given, else [`find_trachea_seed`] with `seed`;
 /// 2. region growing from it, 6-connected, below an upper threshold raised by `growth`'s
 ///    schedule until the region explodes (see [`grow_adaptive`]);
@@ -63,10 +66,40 @@ pub struct Segmentation {
     pub volume_ml: f64,
     /// Number of airway branches (see [`super::branches`]).
     pub branch_count: usize,
+    /// Voxels of the CT that were NaN or ±inf, counted as tissue.
+    pub non_finite_voxels: usize,
+}
+
+/// `ct` with every non-finite voxel (NaN, ±inf) set to +inf, and their count; borrowed
+/// unchanged when there are none.
+///
+/// The rule: a voxel that is not a number was not measured (resampling pads the space outside
+/// the scanner's field of view with NaN in common tools), so it cannot be shown to be airway;
+/// as tissue it is never grown into and the lumen surface closes against it, while the rest of
+/// the scan stays usable. −inf is not a plausible attenuation either and gets the same rule,
+/// so no threshold can take it for air.
+pub fn non_finite_as_tissue(ct: &Volume<f32>) -> (Cow<'_, Volume<f32>>, usize) {
+    let n = ct.data.par_iter().filter(|v| !v.is_finite()).count();
+    if n == 0 {
+        return (Cow::Borrowed(ct), 0);
+    }
+    let data = ct
+        .data
+        .par_iter()
+        .map(|&v| if v.is_finite() { v } else { f32::INFINITY })
+        .collect();
+    let clean = Volume {
+        dims: ct.dims,
+        affine: ct.affine,
+        data,
+    };
+    (Cow::Owned(clean), n)
 }
 
 /// Segment the airway lumen of a chest CT (HU). See [`SegmentOptions`] for the steps.
 pub fn segment_airway(ct: &Volume<f32>, opts: &SegmentOptions) -> Result<Segmentation> {
+    let (ct, non_finite_voxels) = non_finite_as_tissue(ct);
+    let ct = ct.as_ref();
     let (seed_voxel, seed_automatic) = match opts.seed_world {
         Some(w) => {
             let v = ct.voxel_at_world(w).ok_or_else(|| {
@@ -116,6 +149,7 @@ pub fn segment_airway(ct: &Volume<f32>, opts: &SegmentOptions) -> Result<Segment
         exploded: g.exploded,
         volume_ml: count as f64 * sp[0] * sp[1] * sp[2] / 1000.0,
         branch_count,
+        non_finite_voxels,
     })
 }
 

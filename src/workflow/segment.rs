@@ -55,6 +55,9 @@ pub struct SegmentSummary {
     pub volume_ml: f64,
     /// Airway branches found (splits counted along the geodesic distance from the seed).
     pub branches: usize,
+    /// CT voxels that were NaN or ±inf; they count as tissue (see
+    /// [`crate::volume::segment::non_finite_as_tissue`]).
+    pub non_finite_voxels: usize,
     /// Lumen surface area (mm²) of the final mesh.
     pub surface_area_mm2: f64,
     /// Triangles of the final mesh.
@@ -147,6 +150,7 @@ pub fn segment_command(
         leak_stopped: seg.exploded,
         volume_ml: seg.volume_ml,
         branches: seg.branch_count,
+        non_finite_voxels: seg.non_finite_voxels,
         surface_area_mm2: mesh.area(),
         triangles: mesh.triangles.len(),
         mesh: report,
@@ -172,8 +176,16 @@ impl SegmentSummary {
             .iter()
             .map(|t| format!("{:.0}", t.hu))
             .collect();
+        let non_finite = if self.non_finite_voxels > 0 {
+            format!(
+                "note      {}: {} voxels are NaN or infinite, counted as tissue (never airway)\n",
+                self.ct, self.non_finite_voxels
+            )
+        } else {
+            String::new()
+        };
         format!(
-            "seed      ({:.1}, {:.1}, {:.1}) mm, voxel {:?} ({})\n\
+            "{non_finite}seed      ({:.1}, {:.1}, {:.1}) mm, voxel {:?} ({})\n\
              threshold {:.0} HU (tried {}){}\n\
              airway    {:.1} ml, {} branches\n\
              mesh      {} triangles, {:.0} mm² (marching cubes {} → smoothed, mean shift {:.3} mm → decimated, mean shift {:.3} mm)\n\
