@@ -71,14 +71,9 @@ fn volume(dims: [usize; 3], f: impl Fn(usize, [usize; 3]) -> f32) -> Volume<f32>
     Volume::from_data(dims, a, data).unwrap()
 }
 
-/// A cheap seeded hash to [0, 1): noise that needs no RNG state.
+/// A seeded hash to [0, 1): noise that needs no RNG state.
 fn hash01(n: usize, salt: u64) -> f32 {
-    let mut x = (n as u64 ^ salt.wrapping_mul(0x9E37_79B9_7F4A_7C15)).wrapping_add(1);
-    x ^= x >> 33;
-    x = x.wrapping_mul(0xff51_afd7_ed55_8ccd);
-    x ^= x >> 33;
-    x = x.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
-    x ^= x >> 33;
+    let x = bronchosim::rng::splitmix64(n as u64 ^ salt.rotate_left(32));
     (x >> 40) as f32 / (1u64 << 24) as f32
 }
 

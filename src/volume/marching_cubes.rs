@@ -386,7 +386,7 @@ mod tests {
     fn non_finite_and_huge_values_give_finite_vertices() {
         // Seeded mix of air, tissue, NaN, ±inf and ±f32::MAX: every vertex stays finite and
         // on its grid edge, and NaN never counts as air (a NaN-only grid has no surface).
-        let mut r = crate::phantom::rng::Pcg32::new(17, 5);
+        let mut r = crate::rng::Pcg32::new(17, 5);
         let pick = [
             -1000.0,
             40.0,
