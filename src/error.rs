@@ -26,9 +26,29 @@ pub enum Error {
     /// A required file or folder is missing.
     #[error("{path}: not found ({what})")]
     Missing { path: PathBuf, what: String },
+    /// An image operation (sizes, remapping, encoding) that cannot be done.
+    #[error(transparent)]
+    Image(#[from] crate::image::ImageError),
+    /// A volume operation (segmentation, marching cubes, a path) that cannot be done.
+    #[error(transparent)]
+    Volume(#[from] crate::volume::VolumeError),
+    /// A surface operation (mesh, ray-casting scene, texture atlas) that cannot be done.
+    #[error(transparent)]
+    Geometry(#[from] crate::mesh::GeometryError),
     /// A shading model that cannot be fitted or used as asked.
     #[error(transparent)]
     Shading(#[from] crate::shading::ShadingError),
+    /// A build that cannot go on with these frames.
+    #[error(transparent)]
+    Build(#[from] crate::workflow::build::BuildError),
+    /// Options out of their range.
+    #[error("{stage}: {message}")]
+    BadOptions {
+        /// Which command or stage.
+        stage: &'static str,
+        /// What is wrong.
+        message: String,
+    },
     /// An error that concerns no single file and no layer's typed error.
     #[error("{0}")]
     Other(String),

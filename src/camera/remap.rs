@@ -3,7 +3,8 @@
 
 use super::remap_plan::check_map;
 use super::UndistortMap;
-use crate::{Error, Result};
+use crate::image::error::ImageError;
+use crate::Result;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 
@@ -24,10 +25,13 @@ pub fn remap_bilinear(
 ) -> Result<Vec<f32>> {
     let (sw, sh) = (src_width as usize, src_height as usize);
     if channels == 0 || src.len() != sw * sh * channels {
-        return Err(Error::Other(format!(
-            "remap: source image has {} values, expected {sw} x {sh} x {channels}",
-            src.len()
-        )));
+        return Err(ImageError::BufferSize {
+            stage: "remap",
+            what: "the source image",
+            got: src.len(),
+            expected: sw * sh * channels.max(1),
+        }
+        .into());
     }
     check_map(map, src_width, src_height)?;
     // One pass over output tiles, computing taps on the fly (exact f32 weights); no plan kept.

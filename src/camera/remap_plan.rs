@@ -3,7 +3,8 @@
 //! and arithmetic (as cv2.convertMaps does for cv2.remap).
 
 use super::UndistortMap;
-use crate::{Error, Result};
+use crate::image::error::ImageError;
+use crate::Result;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 
@@ -114,12 +115,13 @@ impl RemapPlan {
     ) -> Result<()> {
         let img = Image::new(src, self.src_width, self.src_height, channels, fill)?;
         if out.len() != self.taps.len() * channels {
-            return Err(Error::Other(format!(
-                "remap: output buffer has {} values, expected {} x {} x {channels}",
-                out.len(),
-                self.width,
-                self.height
-            )));
+            return Err(ImageError::BufferSize {
+                stage: "remap",
+                what: "the output buffer",
+                got: out.len(),
+                expected: self.width as usize * self.height as usize * channels,
+            }
+            .into());
         }
         let w = self.width as usize;
         if w == 0 {
@@ -146,18 +148,22 @@ const BORDER: u32 = 1 << 31;
 pub(super) fn check_map(map: &UndistortMap, src_width: u32, src_height: u32) -> Result<()> {
     let n = map.width as usize * map.height as usize;
     if map.map_x.len() != n || map.map_y.len() != n {
-        return Err(Error::Other(format!(
-            "remap: map of {} x {} pixels holds {} / {} positions",
-            map.width,
-            map.height,
-            map.map_x.len(),
-            map.map_y.len()
-        )));
+        return Err(ImageError::BufferSize {
+            stage: "remap",
+            what: "the map",
+            got: map.map_x.len().min(map.map_y.len()),
+            expected: n,
+        }
+        .into());
     }
     if src_width as u64 * src_height as u64 >= BORDER as u64 || n as u64 >= BORDER as u64 {
-        return Err(Error::Other(format!(
-            "remap: {src_width} x {src_height} source or {n}-pixel map too large (2^31 pixels at most)"
-        )));
+        return Err(ImageError::Inconsistent {
+            stage: "remap",
+            message: format!(
+                "{src_width} x {src_height} source or {n}-pixel map too large (2^31 pixels at most)"
+            ),
+        }
+        .into());
     }
     Ok(())
 }
@@ -175,10 +181,13 @@ impl<'a> Image<'a> {
     fn new(data: &'a [f32], width: u32, height: u32, c: usize, fill: f32) -> Result<Self> {
         let (w, h) = (width as usize, height as usize);
         if c == 0 || data.len() != w * h * c {
-            return Err(Error::Other(format!(
-                "remap: source image has {} values, expected {w} x {h} x {c}",
-                data.len()
-            )));
+            return Err(ImageError::BufferSize {
+                stage: "remap",
+                what: "the source image",
+                got: data.len(),
+                expected: w * h * c.max(1),
+            }
+            .into());
         }
         Ok(Self {
             data,

@@ -3,8 +3,9 @@
 //! reused on every frame).
 
 use super::Camera;
+use crate::image::error::ImageError;
 use crate::math::Matrix3;
-use crate::{Error, Result};
+use crate::Result;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
 
@@ -36,10 +37,9 @@ impl UndistortMap {
         let ir = new_k
             .try_inverse()
             .filter(|m| m.iter().all(|v| v.is_finite()))
-            .ok_or_else(|| {
-                Error::Other(format!(
-                    "undistortion map: new camera matrix is singular: {new_k}"
-                ))
+            .ok_or_else(|| ImageError::Inconsistent {
+                stage: "undistortion map",
+                message: format!("the new camera matrix is singular: {new_k}"),
             })?;
         let (w, h) = (width as usize, height as usize);
         let n = w * h;

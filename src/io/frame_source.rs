@@ -47,12 +47,13 @@ impl FrameSource {
     /// must be `width` x `height` pixels. Size and index range are checked before decoding.
     pub fn video(path: &Path, indices: Vec<usize>, width: u32, height: u32) -> Result<Self> {
         if let Some(w) = indices.windows(2).find(|w| w[1] <= w[0]) {
-            return Err(Error::Other(format!(
-                "{}: video frame indices must strictly increase ({} is followed by {})",
-                path.display(),
-                w[0],
-                w[1]
-            )));
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "video frame indices must strictly increase ({} is followed by {})",
+                    w[0], w[1]
+                ),
+            ));
         }
         let reader = VideoReader::open(path)?;
         if (reader.width(), reader.height()) != (width, height) {
@@ -100,15 +101,17 @@ impl FrameSource {
             }
         }
         if !paths.is_empty() && !indices.is_empty() {
-            return Err(Error::Other(
-                "poses mix \"image\" and \"frame\" entries; use one kind".into(),
-            ));
+            return Err(Error::BadOptions {
+                stage: "frames",
+                message: "poses mix \"image\" and \"frame\" entries; use one kind".into(),
+            });
         }
         if indices.is_empty() {
             return Ok(Self::images(paths, width, height));
         }
-        let video = video.ok_or_else(|| {
-            Error::Other("poses refer to video frames but the case has no video file".into())
+        let video = video.ok_or_else(|| Error::BadOptions {
+            stage: "frames",
+            message: "poses refer to video frames but the case has no video file".into(),
         })?;
         Self::video(video, indices, width, height)
     }

@@ -22,18 +22,17 @@ fn check_mesh(path: &Path, mesh: &TriMesh, uvs: Option<&[[f32; 2]]>) -> Result<(
         .iter()
         .find(|t| t.iter().any(|&v| v as usize >= n))
     {
-        return Err(Error::Other(format!(
-            "{}: cannot write a mesh whose triangle {t:?} refers past its {n} vertices",
-            path.display()
-        )));
+        return Err(Error::invalid(
+            path,
+            format!("cannot write a mesh whose triangle {t:?} refers past its {n} vertices"),
+        ));
     }
     if let Some(uv) = uvs {
         if uv.len() != n {
-            return Err(Error::Other(format!(
-                "{}: {} UVs given for {n} vertices",
-                path.display(),
-                uv.len()
-            )));
+            return Err(Error::invalid(
+                path,
+                format!("{} UVs given for {n} vertices", uv.len()),
+            ));
         }
     }
     Ok(())
@@ -424,7 +423,7 @@ pub fn write_glb(path: &Path, mesh: &TriMesh, texture: Option<(&[[f32; 2]], &[u8
     }
     root.buffers[0].byte_length = bin.len().into();
     let mut js = json::serialize::to_vec(&root)
-        .map_err(|e| Error::Other(format!("{}: glTF JSON: {e}", path.display())))?;
+        .map_err(|e| Error::invalid(path, format!("glTF JSON: {e}")))?;
     while js.len() % 4 != 0 {
         js.push(b' ');
     }

@@ -4,6 +4,7 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter};
 use std::path::Path;
 
+use crate::image::error::ImageError;
 use crate::image::srgb::{
     linear_to_srgb16, linear_to_srgb8, srgb16_to_linear_lut, srgb8_to_linear_lut,
 };
@@ -111,13 +112,15 @@ pub fn write_png_srgb16(path: &Path, frame: &Frame) -> Result<()> {
 fn check_frame(path: &Path, frame: &Frame) -> Result<()> {
     let expected = 3 * frame.width as usize * frame.height as usize;
     if frame.rgb.len() != expected || frame.width == 0 || frame.height == 0 {
-        return Err(Error::Other(format!(
-            "{}: cannot write a {}x{} frame holding {} values (expected {expected}, non-empty)",
-            path.display(),
-            frame.width,
-            frame.height,
-            frame.rgb.len()
-        )));
+        return Err(Error::invalid(
+            path,
+            format!(
+                "cannot write a {}x{} frame holding {} values (expected {expected}, non-empty)",
+                frame.width,
+                frame.height,
+                frame.rgb.len()
+            ),
+        ));
     }
     Ok(())
 }
@@ -126,7 +129,11 @@ fn write_png(path: &Path, frame: &Frame, depth: png::BitDepth, data: &[u8]) -> R
     let file = File::create(path).map_err(|e| Error::io(path, e))?;
     let failed = |e: png::EncodingError| match e {
         png::EncodingError::IoError(io) => Error::io(path, io),
-        other => Error::Other(format!("{}: PNG encoding failed: {other}", path.display())),
+        other => ImageError::Encoding {
+            stage: path.display().to_string(),
+            message: other.to_string(),
+        }
+        .into(),
     };
     let mut encoder = png::Encoder::new(BufWriter::new(file), frame.width, frame.height);
     encoder.set_color(png::ColorType::Rgb);

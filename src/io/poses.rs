@@ -174,16 +174,13 @@ fn strip_path_prefix(message: &str, path: &Path) -> String {
 /// Each pose is validated first so a file this writes is always readable by [`read_poses`].
 pub fn write_poses(path: &Path, poses: &[PoseEntry], base_dir: &Path) -> Result<()> {
     if poses.is_empty() {
-        return Err(Error::Other(format!(
-            "{}: no poses to write",
-            path.display()
-        )));
+        return Err(Error::invalid(path, "no poses to write"));
     }
     let mut text = String::from("{ \"frames\": [\n");
     for (i, pose) in poses.iter().enumerate() {
         pose.pose
             .validate()
-            .map_err(|msg| Error::Other(format!("{}: frame {i}: {msg}", path.display())))?;
+            .map_err(|msg| Error::invalid(path, format!("frame {i}: {msg}")))?;
         let frame = match &pose.frame {
             FrameRef::Image(p) => {
                 let rel = relative_slash_path(base_dir, p, path)?;

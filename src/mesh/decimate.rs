@@ -5,7 +5,8 @@
 use super::metrics::sorted_edges;
 use super::TriMesh;
 use crate::math::Point3;
-use crate::{Error, Result};
+use crate::mesh::error::GeometryError;
+use crate::Result;
 
 /// Parameters of [`decimate`].
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -55,10 +56,14 @@ pub struct DecimateReport {
 /// their exact rims.
 pub fn decimate(mesh: &TriMesh, opts: &DecimateOptions) -> Result<(TriMesh, DecimateReport)> {
     if !(opts.target_edge_mm > 0.0 && opts.target_edge_mm.is_finite() && opts.max_error_mm > 0.0) {
-        return Err(Error::Other(format!(
-            "decimation: target edge {} mm and max error {} mm must be positive",
-            opts.target_edge_mm, opts.max_error_mm
-        )));
+        return Err(GeometryError::BadOptions {
+            stage: "decimation",
+            message: format!(
+                "target edge {} mm and max error {} mm must be positive",
+                opts.target_edge_mm, opts.max_error_mm
+            ),
+        }
+        .into());
     }
     let area = mesh.area();
     let target =

@@ -21,8 +21,9 @@ use super::metrics::{deviation, mesh_stats, Deviation, MeshStats};
 use super::smooth::{taubin, TaubinOptions};
 use super::TriMesh;
 use crate::math::{Point3, Vector3};
+use crate::mesh::error::GeometryError;
 use crate::volume::{marching_cubes, Volume};
-use crate::{Error, Result};
+use crate::Result;
 
 /// Options of [`lumen_mesh`]. Steps, in order: the lumen field (the CT limited to `band_mm`
 /// beyond the mask, see [`super::lumen_field`]); marching cubes of it at `iso_hu`; the largest
@@ -112,10 +113,11 @@ pub fn lumen_mesh(
     )?;
     let all = marching_cubes(&field, opts.iso_hu, None)?;
     if all.triangles.is_empty() {
-        return Err(Error::Other(format!(
-            "lumen mesh: no surface at {} HU around the airway mask inside the CT's grid of {:?} voxels (the airway must have tissue around it, and the grid 2 voxels along each axis)",
-            opts.iso_hu, ct.dims
-        )));
+        return Err(GeometryError::NoLumenSurface {
+            iso_hu: opts.iso_hu,
+            dims: ct.dims,
+        }
+        .into());
     }
     report.marching_cubes = mesh_stats(&all);
     let (mc, components) = keep_largest_component(&all);

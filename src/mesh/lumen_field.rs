@@ -20,11 +20,13 @@
 //! Non-finite CT values (NaN, ±inf) count as tissue (the wall's +40 HU at the default level),
 //! and values are clamped to ±4000 HU around the level, so every interpolation stays finite.
 
+use crate::mesh::error::GeometryError;
 use crate::volume::morphology::distance_transform_sq;
 use crate::volume::region_grow::flood_fill;
 use crate::volume::segment::{bounding_box, crop};
 use crate::volume::Volume;
-use crate::{Error, Result};
+use crate::volume::VolumeError;
+use crate::Result;
 use rayon::prelude::*;
 
 /// Where the CT is not a number, the field holds `iso + WALL_ABOVE_ISO_HU` (soft tissue,
@@ -55,25 +57,31 @@ pub fn lumen_field(
     opts: &LumenFieldOptions,
 ) -> Result<Volume<f32>> {
     if mask.dims != ct.dims {
-        return Err(Error::Other(format!(
-            "lumen mesh: mask dims {:?} differ from the CT's {:?}",
-            mask.dims, ct.dims
-        )));
+        return Err(VolumeError::GridMismatch {
+            stage: "lumen mesh",
+            what: "mask",
+            got: mask.dims,
+            expected: ct.dims,
+        }
+        .into());
     }
     if !(opts.band_mm >= 0.0 && opts.band_mm.is_finite() && opts.slope_hu_per_mm > 0.0) {
-        return Err(Error::Other(format!(
-            "lumen mesh: band {} mm must be >= 0 and the slope {} HU/mm > 0",
-            opts.band_mm, opts.slope_hu_per_mm
-        )));
+        return Err(GeometryError::BadOptions {
+            stage: "lumen mesh",
+            message: format!(
+                "band {} mm must be >= 0 and the slope {} HU/mm > 0",
+                opts.band_mm, opts.slope_hu_per_mm
+            ),
+        }
+        .into());
     }
     if !opts.iso_hu.is_finite() {
-        return Err(Error::Other(format!(
-            "lumen mesh: iso level {} HU is not finite",
-            opts.iso_hu
-        )));
+        return Err(VolumeError::BadIsoLevel(opts.iso_hu).into());
     }
-    let (lo, hi) = bounding_box(mask)
-        .ok_or_else(|| Error::Other("lumen mesh: the airway mask is empty".into()))?;
+    let (lo, hi) = bounding_box(mask).ok_or(VolumeError::Empty {
+        stage: "lumen mesh",
+        what: "airway mask",
+    })?;
     let sp = ct.spacing();
     let pad = [0, 1, 2].map(|a| (opts.band_mm / sp[a]).ceil() as usize + 2);
     let lo = [0, 1, 2].map(|a| lo[a].saturating_sub(pad[a]));

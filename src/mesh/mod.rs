@@ -2,10 +2,12 @@
 
 pub mod components;
 pub mod decimate;
+pub mod error;
 pub mod lumen;
 pub mod lumen_field;
 pub mod metrics;
 pub mod smooth;
 mod trimesh;
 
+pub use error::GeometryError;
 pub use trimesh::TriMesh;

@@ -6,7 +6,8 @@ use rayon::prelude::*;
 use super::metrics::sorted_edges;
 use super::TriMesh;
 use crate::math::{Point3, Vector3};
-use crate::{Error, Result};
+use crate::mesh::error::GeometryError;
+use crate::Result;
 
 /// Parameters of [`taubin`].
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -86,20 +87,26 @@ fn adjacency(mesh: &TriMesh) -> Adjacency {
 /// the rims where the airway leaves the CT do not move.
 pub fn taubin(mesh: &mut TriMesh, opts: &TaubinOptions) -> Result<()> {
     if !(opts.lambda > 0.0 && opts.lambda < 1.0 && opts.mu < -opts.lambda && opts.mu > -1.0) {
-        return Err(Error::Other(format!(
-            "Taubin smoothing: need 0 < lambda < 1 and -1 < mu < -lambda, got lambda {} mu {}",
-            opts.lambda, opts.mu
-        )));
+        return Err(GeometryError::BadOptions {
+            stage: "Taubin smoothing",
+            message: format!(
+                "need 0 < lambda < 1 and -1 < mu < -lambda, got lambda {} mu {}",
+                opts.lambda, opts.mu
+            ),
+        }
+        .into());
     }
     if let Some(t) = mesh
         .triangles
         .iter()
-        .find(|t| t.iter().any(|&v| v as usize >= mesh.positions.len()))
+        .position(|t| t.iter().any(|&v| v as usize >= mesh.positions.len()))
     {
-        return Err(Error::Other(format!(
-            "Taubin smoothing: triangle {t:?} refers to a vertex past {}",
-            mesh.positions.len()
-        )));
+        return Err(GeometryError::VertexIndex {
+            stage: "Taubin smoothing",
+            triangle: t,
+            vertices: mesh.positions.len(),
+        }
+        .into());
     }
     let adj = adjacency(mesh);
     let mut next = mesh.positions.clone();

@@ -161,10 +161,13 @@ pub fn phantom_albedo(seed: u64) -> MucosaAlbedo {
 /// Write the phantom case to `out` (a new folder); see the module docs.
 pub fn write_phantom_case(out: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     if opts.frames == 0 || opts.width < 8 || opts.height < 8 {
-        return Err(Error::Other(format!(
-            "phantom: need at least one frame and 8x8 pixels (got {} frames, {}x{})",
-            opts.frames, opts.width, opts.height
-        )));
+        return Err(Error::BadOptions {
+            stage: "phantom",
+            message: format!(
+                "need at least one frame and 8x8 pixels (got {} frames, {}x{})",
+                opts.frames, opts.width, opts.height
+            ),
+        });
     }
     if out.exists() && !opts.force {
         return Err(Error::invalid(

@@ -132,10 +132,13 @@ impl Texture {
 pub fn make_ct_phantom(opts: &CtPhantomOptions) -> Result<CtPhantom> {
     let sp = opts.spacing_mm;
     if !sp.iter().all(|s| s.is_finite() && *s > 0.0) || opts.supersample == 0 {
-        return Err(Error::Other(format!(
-            "phantom: spacing {sp:?} must be positive and supersample {} at least 1",
-            opts.supersample
-        )));
+        return Err(Error::BadOptions {
+            stage: "phantom CT",
+            message: format!(
+                "spacing {} x {} x {} mm must be positive and supersample {} at least 1",
+                sp[0], sp[1], sp[2], opts.supersample
+            ),
+        });
     }
     let tree = AirwayTree::new(&opts.tree);
     let (lo, hi) = tree.bounds();
@@ -163,9 +166,13 @@ pub fn make_ct_phantom(opts: &CtPhantomOptions) -> Result<CtPhantom> {
         }
     };
     if dims.iter().any(|&d| d < 4) || dims[0] * dims[1] * dims[2] > 1 << 31 {
-        return Err(Error::Other(format!(
-            "phantom: grid {dims:?} is too small or too large"
-        )));
+        return Err(Error::BadOptions {
+            stage: "phantom CT",
+            message: format!(
+                "a {} x {} x {} grid is too small or too large",
+                dims[0], dims[1], dims[2]
+            ),
+        });
     }
     // LPS-like sform: i runs to the patient's left (-x), j posterior (-y), k superior.
     let half = [0, 1, 2].map(|a| (dims[a] - 1) as f64 * sp[a] / 2.0);

@@ -8,6 +8,7 @@ use crate::rng::Pcg32;
 use crate::volume::morphology::dilate;
 use crate::volume::segment::{bounding_box, crop};
 use crate::volume::Volume;
+use crate::volume::VolumeError;
 use crate::{Error, Result};
 use rayon::prelude::*;
 use std::path::Path;
@@ -80,13 +81,19 @@ pub fn ct_from_mask(mask: &Volume<f32>, opts: &FromMaskOptions) -> Result<MaskPh
         || !(opts.wall_thickness_mm >= 0.0)
         || !(opts.blur_sigma_voxels >= 0.0);
     if bad {
-        return Err(Error::Other(format!(
-            "mask phantom: need downsample >= 1, wall and blur >= 0 (got {opts:?})"
-        )));
+        return Err(Error::BadOptions {
+            stage: "mask phantom",
+            message: format!(
+                "need downsample >= 1, wall and blur >= 0 (got downsample {}, wall {} mm, blur {} voxels)",
+                opts.downsample, opts.wall_thickness_mm, opts.blur_sigma_voxels
+            ),
+        });
     }
     let bin = mask.map(|v| u8::from(v > 0.5));
-    let (blo, bhi) = bounding_box(&bin)
-        .ok_or_else(|| Error::Other("mask phantom: the mask has no voxel above 0.5".into()))?;
+    let (blo, bhi) = bounding_box(&bin).ok_or(VolumeError::Empty {
+        stage: "mask phantom",
+        what: "mask (no voxel above 0.5)",
+    })?;
     let sp0 = bin.spacing();
     let bin = match opts.crop_margin_mm {
         Some(m) => {

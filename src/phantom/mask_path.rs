@@ -12,10 +12,12 @@
 //! `length / (dt + 0.5)²` gives the path that hugs the centre of the lumen.
 
 use crate::math::Point3;
+use crate::mesh::GeometryError;
 use crate::volume::geodesic::{centred_path, dijkstra, inside_distance, neighbours, step};
 use crate::volume::morphology::{component_of, distance_transform_sq};
 use crate::volume::Volume;
-use crate::{Error, Result};
+use crate::volume::VolumeError;
+use crate::Result;
 
 /// The centreline through a mask and the signed distance it was found with.
 #[derive(Clone, Debug)]
@@ -39,11 +41,16 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
         .iter()
         .enumerate()
         .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(&a.0)))
-        .ok_or_else(|| Error::Other("mask centreline: empty mask".into()))?;
+        .ok_or(VolumeError::Empty {
+            stage: "mask centreline",
+            what: "mask",
+        })?;
     if best <= 0.0 || best.is_infinite() {
-        return Err(Error::Other(
-            "mask centreline: the mask has no lumen voxel".into(),
-        ));
+        return Err(VolumeError::Empty {
+            stage: "mask centreline",
+            what: "lumen (no voxel inside the mask's wall)",
+        }
+        .into());
     }
     let seed = [
         thick % dims[0],
@@ -162,17 +169,23 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
         last_active = members;
     }
     if splits.len() < 2 {
-        return Err(Error::Other(format!(
-            "mask centreline: found {} of the two expected splits (carina, lobar) below the top",
-            splits.len()
-        )));
+        return Err(GeometryError::Degenerate {
+            stage: "mask centreline",
+            message: format!(
+                "found {} of the two expected splits (carina, lobar) below the top",
+                splits.len()
+            ),
+        }
+        .into());
     }
     let target = target
         .or_else(|| best_of(&last_active, &dt_in))
-        .ok_or_else(|| Error::Other("mask centreline: no target voxel".into()))?;
+        .ok_or(VolumeError::Empty {
+            stage: "mask centreline",
+            what: "set of target voxels",
+        })?;
     // Centred path: cost length / (dt + 0.5)², averaged over the edge's two voxels.
-    let chain = centred_path(&comp, &dt_in, start, target)
-        .map_err(|e| Error::Other(format!("mask centreline: {e}")))?;
+    let chain = centred_path(&comp, &dt_in, start, target)?;
     // The first 15 mm are dropped: segmentations often taper at the cut top of the trachea.
     let pts: Vec<Point3<f64>> = chain.into_iter().map(world).collect();
     let mut arc = 0.0;

@@ -7,6 +7,7 @@
 
 use super::anatomy::AirwayTree;
 use crate::math::{Affine, Point3, Vector3};
+use crate::mesh::GeometryError;
 use crate::rng::Pcg32;
 use crate::{Error, Result};
 
@@ -111,10 +112,11 @@ impl SmoothPath {
     pub fn new(polyline: &[Point3<f64>], step: f64, sigma: f64) -> Result<Self> {
         let raw = resample(polyline, step);
         if raw.len() < 4 {
-            return Err(Error::Other(format!(
-                "camera path: centreline too short ({} points at {step} mm)",
-                raw.len()
-            )));
+            return Err(GeometryError::Degenerate {
+                stage: "camera path",
+                message: format!("centreline too short ({} points at {step} mm)", raw.len()),
+            }
+            .into());
         }
         let r = (3.0 * sigma / step).ceil() as isize;
         let w: Vec<f64> = (-r..=r)
@@ -283,9 +285,13 @@ fn usable_length(
         }
     }
     if len < 10.0 {
-        return Err(Error::Other(format!(
-            "camera path: only {len:.1} mm of the centreline keep {clearance} mm from the wall"
-        )));
+        return Err(GeometryError::Degenerate {
+            stage: "camera path",
+            message: format!(
+                "only {len:.1} mm of the centreline keep {clearance} mm from the wall"
+            ),
+        }
+        .into());
     }
     Ok(len)
 }
@@ -299,7 +305,10 @@ pub fn camera_path(
     opts: &PathOptions,
 ) -> Result<Vec<Affine>> {
     if opts.frames == 0 {
-        return Err(Error::Other("camera path: need at least one frame".into()));
+        return Err(Error::BadOptions {
+            stage: "camera path",
+            message: "need at least one frame".into(),
+        });
     }
     let mut rng = Pcg32::new(opts.seed, 0x9A7);
     let (w1, w2, w3, w4, w5) = (
@@ -327,9 +336,14 @@ pub fn camera_path(
         let c0 = path.at(s);
         let depth = -sdf(&c0);
         if depth < opts.min_clearance_mm {
-            return Err(Error::Other(format!(
-                "camera path: centreline point {i} at {c0:?} is only {depth:.2} mm from the wall"
-            )));
+            return Err(GeometryError::Degenerate {
+                stage: "camera path",
+                message: format!(
+                    "centreline point {i} at ({:.1}, {:.1}, {:.1}) mm is only {depth:.2} mm from the wall",
+                    c0.x, c0.y, c0.z
+                ),
+            }
+            .into());
         }
         let t = path.tangent(s);
         down = (down - t * down.dot(&t))
@@ -375,9 +389,14 @@ pub fn novel_views(
         let c0 = path.at(s);
         let depth = -sdf(&c0);
         if depth < opts.min_clearance_mm {
-            return Err(Error::Other(format!(
-                "novel views: centreline point at {c0:?} is only {depth:.2} mm from the wall"
-            )));
+            return Err(GeometryError::Degenerate {
+                stage: "novel views",
+                message: format!(
+                    "centreline point at ({:.1}, {:.1}, {:.1}) mm is only {depth:.2} mm from the wall",
+                    c0.x, c0.y, c0.z
+                ),
+            }
+            .into());
         }
         let t = path.tangent(s);
         down = (down - t * down.dot(&t))

@@ -3,8 +3,9 @@
 use super::bvh::{Bvh, Node, RawHit};
 use super::bvh_build::build;
 use super::packet::PACKET;
+use crate::mesh::error::GeometryError;
 use crate::mesh::TriMesh;
-use crate::{Error, Result};
+use crate::Result;
 use rayon::prelude::*;
 
 /// A ray–surface hit.
@@ -61,15 +62,20 @@ impl Scene {
         let mut tris = Vec::with_capacity(mesh.triangles.len());
         for (i, t) in mesh.triangles.iter().enumerate() {
             if t.iter().any(|&v| v as usize >= nv) {
-                return Err(Error::Other(format!(
-                    "mesh: triangle {i} indexes vertex {t:?} but the mesh has {nv} vertices"
-                )));
+                return Err(GeometryError::VertexIndex {
+                    stage: "ray-casting scene",
+                    triangle: i,
+                    vertices: nv,
+                }
+                .into());
             }
             let v = t.map(|k| positions[k as usize]);
             if v.iter().flatten().any(|c| !c.is_finite()) {
-                return Err(Error::Other(format!(
-                    "mesh: triangle {i} has a non-finite vertex"
-                )));
+                return Err(GeometryError::NonFiniteVertex {
+                    stage: "ray-casting scene",
+                    triangle: i,
+                }
+                .into());
             }
             tris.push(v);
         }
@@ -78,11 +84,12 @@ impl Scene {
         } else {
             build::<4>(&tris).map(Accel::W4)
         }
-        .ok_or_else(|| {
-            Error::Other(format!(
-                "mesh: BVH too deep for the traversal stack ({} triangles); degenerate geometry?",
+        .ok_or_else(|| GeometryError::Degenerate {
+            stage: "ray-casting scene",
+            message: format!(
+                "BVH too deep for the traversal stack ({} triangles); degenerate geometry?",
                 tris.len()
-            ))
+            ),
         })?;
         let normals = mesh
             .vertex_normals()

@@ -11,6 +11,7 @@ use rayon::prelude::*;
 use crate::camera::pose::rigid_inverse;
 use crate::camera::Camera;
 use crate::image::Frame;
+use crate::image::ImageError;
 use crate::math::{transform_point, Affine, Point3};
 use crate::raycast::{cast_frame, cast_frame_with, GBuffer, RayTable, Scene};
 use crate::shading::paper::ViewpointIndex;
@@ -47,16 +48,20 @@ pub fn reproject_nearest_frame(
     let poses: Vec<Affine> = training.iter().map(|t| *t.camera_to_world).collect();
     let index = ViewpointIndex::from_poses(&poses);
     let Some(near) = index.nearest(camera_to_world) else {
-        return Err(Error::Other(
-            "reproject_nearest_frame: no training frames".into(),
-        ));
+        return Err(Error::BadOptions {
+            stage: "baseline (a)",
+            message: "no training frames to reproject".into(),
+        });
     };
     let tv = training[near];
     if tv.frame.width != training_camera.width || tv.frame.height != training_camera.height {
-        return Err(Error::Other(format!(
-            "reproject_nearest_frame: frame {near} is {}x{}, the training camera {}x{}",
-            tv.frame.width, tv.frame.height, training_camera.width, training_camera.height
-        )));
+        return Err(ImageError::SizeMismatch {
+            stage: "baseline (a)",
+            what: format!("training frame {near}"),
+            got: [tv.frame.width, tv.frame.height],
+            expected: [training_camera.width, training_camera.height],
+        }
+        .into());
     }
     let view = cast_frame(scene, camera, camera_to_world);
     let train = cast_frame_with(scene, &RayTable::new(training_camera), tv.camera_to_world);

@@ -21,7 +21,8 @@ use serde::Serialize;
 use crate::image::quality::{fit_gains, psnr_masked, ssim_masked};
 use crate::image::srgb::linear_to_srgb;
 use crate::image::Frame;
-use crate::{Error, Result};
+use crate::image::ImageError;
+use crate::Result;
 
 /// One image and the pixels it covers (row-major flags, one per pixel).
 #[derive(Clone, Debug)]
@@ -78,19 +79,23 @@ pub fn evaluate_methods(
     names: &[String],
 ) -> Result<Vec<MethodScore>> {
     if names.len() != truth.len() {
-        return Err(Error::Other(format!(
-            "evaluate: {} names for {} reference views",
-            names.len(),
-            truth.len()
-        )));
+        return Err(ImageError::Inconsistent {
+            stage: "evaluate",
+            message: format!("{} names for {} reference views", names.len(), truth.len()),
+        }
+        .into());
     }
     for (name, views) in methods {
         if views.len() != truth.len() {
-            return Err(Error::Other(format!(
-                "evaluate: method {name} has {} views, the reference {}",
-                views.len(),
-                truth.len()
-            )));
+            return Err(ImageError::Inconsistent {
+                stage: "evaluate",
+                message: format!(
+                    "method {name} has {} views, the reference {}",
+                    views.len(),
+                    truth.len()
+                ),
+            }
+            .into());
         }
         for (v, (r, t)) in views.iter().zip(truth).enumerate() {
             let n = t.frame.width as usize * t.frame.height as usize;
@@ -99,10 +104,13 @@ pub fn evaluate_methods(
                 || r.mask.len() != n
                 || t.mask.len() != n
             {
-                return Err(Error::Other(format!(
-                    "evaluate: view {} of method {name} is {}x{}, the reference {}x{} (or a mask has the wrong size)",
-                    names[v], r.frame.width, r.frame.height, t.frame.width, t.frame.height
-                )));
+                return Err(ImageError::SizeMismatch {
+                    stage: "evaluate",
+                    what: format!("view {} of method {name} (or its mask)", names[v]),
+                    got: [r.frame.width, r.frame.height],
+                    expected: [t.frame.width, t.frame.height],
+                }
+                .into());
             }
         }
     }

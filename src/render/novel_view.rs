@@ -7,12 +7,14 @@ use rayon::prelude::*;
 use super::texture_sampler::MipTexture;
 use crate::camera::Camera;
 use crate::image::Frame;
+use crate::image::ImageError;
 use crate::math::Affine;
+use crate::mesh::GeometryError;
 use crate::raycast::Scene;
 use crate::shading::paper::PsiLookup;
 use crate::shading::{FittedShading, ShadingKind};
 use crate::texture::atlas::Atlas;
-use crate::{Error, Result};
+use crate::Result;
 
 /// Everything a view is rendered from. Triangle `t` of `scene` has UV corners `tri_uv[t]`
 /// (the atlas keeps the mesh's triangle order, so the scene may be built from the original
@@ -92,7 +94,10 @@ impl ViewRays {
     pub fn new(camera: &Camera, supersample: u32) -> Result<ViewRays> {
         camera
             .validate()
-            .map_err(|m| Error::Other(format!("render: bad camera: {m}")))?;
+            .map_err(|message| ImageError::Inconsistent {
+                stage: "render",
+                message: format!("bad camera: {message}"),
+            })?;
         let s = supersample.max(1) as usize;
         let (w, h) = (camera.width as usize, camera.height as usize);
         let ray = |u: f64, v: f64| {
@@ -155,11 +160,13 @@ pub fn render_view_with(
     opts: &RenderOptions,
 ) -> Result<(Frame, Vec<bool>)> {
     if inputs.tri_uv.len() != inputs.scene.triangle_count() {
-        return Err(Error::Other(format!(
-            "render: {} triangle UVs for a mesh of {} triangles",
-            inputs.tri_uv.len(),
-            inputs.scene.triangle_count()
-        )));
+        return Err(GeometryError::LengthMismatch {
+            stage: "render",
+            what: "triangle UVs",
+            got: inputs.tri_uv.len(),
+            expected: inputs.scene.triangle_count(),
+        }
+        .into());
     }
     let shade = inputs
         .shading

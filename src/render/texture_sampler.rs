@@ -13,7 +13,8 @@
 //! so the bleed of the capped levels is a slight blur, not a visible seam.
 
 use crate::image::Frame;
-use crate::{Error, Result};
+use crate::image::ImageError;
+use crate::Result;
 
 /// Options of [`MipTexture::new`].
 #[derive(Clone, Debug)]
@@ -61,25 +62,31 @@ impl MipTexture {
     ) -> Result<MipTexture> {
         let (w, h) = (image.width as usize, image.height as usize);
         if w == 0 || h == 0 || image.rgb.len() != 3 * w * h {
-            return Err(Error::Other(format!(
-                "MipTexture: the atlas image is {}x{} with {} values; expected a non-empty RGB image",
-                image.width,
-                image.height,
-                image.rgb.len()
-            )));
+            return Err(ImageError::BufferSize {
+                stage: "texture",
+                what: "the atlas image (a non-empty RGB image)",
+                got: image.rgb.len(),
+                expected: (3 * w * h).max(3),
+            }
+            .into());
         }
         if let Some(c) = coverage {
             if c.len() != w * h {
-                return Err(Error::Other(format!(
-                    "MipTexture: coverage has {} flags for a {w}x{h} atlas",
-                    c.len()
-                )));
+                return Err(ImageError::BufferSize {
+                    stage: "texture",
+                    what: "the coverage flags",
+                    got: c.len(),
+                    expected: w * h,
+                }
+                .into());
             }
         }
         if !(texel_mm.is_finite() && texel_mm > 0.0) {
-            return Err(Error::Other(format!(
-                "MipTexture: texel_mm must be positive, got {texel_mm}"
-            )));
+            return Err(ImageError::Inconsistent {
+                stage: "texture",
+                message: format!("texel_mm must be positive, got {texel_mm}"),
+            }
+            .into());
         }
         let mut data = vec![0.0f32; 4 * w * h];
         for i in 0..w * h {

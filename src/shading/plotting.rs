@@ -2,6 +2,7 @@
 //! or a PNG backend chosen by the file's extension (PNG rendered into an RGB buffer and encoded
 //! with `png`; plotters' own encoder would pull a second image crate).
 
+use crate::image::ImageError;
 use crate::{Error, Result};
 use plotters::prelude::*;
 use std::path::Path;
@@ -34,7 +35,12 @@ macro_rules! render {
         $crate::shading::plotting::register_font();
         let path: &std::path::Path = $path;
         let size: (u32, u32) = $size;
-        let plot_err = |e: String| Error::Other(format!("{}: plot failed: {e}", path.display()));
+        let plot_err = |e: String| {
+            $crate::Error::from($crate::image::ImageError::Encoding {
+                stage: format!("plot {}", path.display()),
+                message: e,
+            })
+        };
         if path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("svg"))
@@ -62,10 +68,12 @@ pub fn write_png(path: &Path, size: (u32, u32), rgb: &[u8]) -> Result<()> {
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), size.0, size.1);
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);
-    let to_err = |e: png::EncodingError| {
-        Error::Other(format!("{}: PNG encoding failed: {e}", path.display()))
+    let to_err = |e: png::EncodingError| ImageError::Encoding {
+        stage: path.display().to_string(),
+        message: e.to_string(),
     };
     let mut writer = enc.write_header().map_err(to_err)?;
     writer.write_image_data(rgb).map_err(to_err)?;
-    writer.finish().map_err(to_err)
+    writer.finish().map_err(to_err)?;
+    Ok(())
 }

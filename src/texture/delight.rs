@@ -17,10 +17,11 @@ use rayon::prelude::*;
 use super::texels::{BlockSphere, TexelSet, BLOCK};
 use crate::camera::Camera;
 use crate::image::Frame;
+use crate::image::ImageError;
 use crate::math::Affine;
 use crate::shading::frame_shading::FrameShading;
 use crate::shading::SampleOptions;
-use crate::{Error, Result};
+use crate::Result;
 
 /// One frame as the de-lighting sees it. All borrowed: a caller streaming a video keeps one
 /// frame in memory at a time.
@@ -181,7 +182,13 @@ impl<'a> FrameCtx<'a> {
         opts: &DelightOptions,
         max_angle: f64,
     ) -> Result<Self> {
-        let bad = |m: String| Err(Error::Other(format!("de-lighting: {m}")));
+        let bad = |message: String| {
+            Err(ImageError::Inconsistent {
+                stage: "de-lighting",
+                message,
+            }
+            .into())
+        };
         let (w, h) = (obs.frame.width as usize, obs.frame.height as usize);
         if obs.camera.width as usize != w || obs.camera.height as usize != h {
             return bad(format!(

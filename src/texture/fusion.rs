@@ -22,6 +22,7 @@ use super::blur::{blur_rect, gaussian_kernel};
 use super::delight::{max_ray_angle, DelightOptions, FrameCtx, Observation};
 use super::texels::{TexelRect, TexelSet, BLOCK};
 use crate::camera::Camera;
+use crate::image::ImageError;
 use crate::{Error, Result};
 
 /// How the frames' de-lit values are combined.
@@ -119,10 +120,11 @@ impl FrameStream for [Observation<'_>] {
     }
     fn observation(&mut self, index: usize) -> Result<Observation<'_>> {
         self.get(index).copied().ok_or_else(|| {
-            Error::Other(format!(
-                "fusion: frame {index} requested from {} frames",
-                self.len()
-            ))
+            ImageError::Inconsistent {
+                stage: "fusion",
+                message: format!("frame {index} requested from {} frames", self.len()),
+            }
+            .into()
         })
     }
 }
@@ -198,7 +200,10 @@ pub fn fuse<S: FrameStream + ?Sized>(
     let n = texels.len();
     let nf = frames.frame_count();
     if nf > u32::MAX as usize - 1 {
-        return Err(Error::Other(format!("fusion: {nf} frames is too many")));
+        return Err(Error::BadOptions {
+            stage: "fusion",
+            message: format!("{nf} frames is too many"),
+        });
     }
     let mut cams = CameraCache::default();
     let mut seen = vec![0u32; n];

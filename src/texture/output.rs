@@ -8,10 +8,11 @@
 use std::path::Path;
 
 use super::atlas::Atlas;
+use crate::image::error::ImageError;
 use crate::image::srgb::linear_to_srgb8;
 use crate::io::atomic::write_bytes_atomic;
 use crate::io::mesh_export::write_glb;
-use crate::{Error, Result};
+use crate::Result;
 
 /// Linear value the 99th percentile of the albedo is mapped to before sRGB encoding: the
 /// fused albedo has an arbitrary global scale (Psi absorbs the camera gain).
@@ -37,13 +38,13 @@ pub fn encode_albedo(
 ) -> Result<AlbedoImage> {
     let n = width as usize * height as usize;
     if rgb.len() != 3 * n || covered.len() != n || n == 0 {
-        return Err(Error::Other(format!(
-            "albedo encoding: a {width}x{height} atlas needs {} values and {n} coverage flags, \
-             got {} and {}",
-            3 * n,
-            rgb.len(),
-            covered.len()
-        )));
+        return Err(ImageError::BufferSize {
+            stage: "albedo encoding",
+            what: "the atlas (RGB values, then coverage flags x 3)",
+            got: rgb.len().min(3 * covered.len()),
+            expected: 3 * n,
+        }
+        .into());
     }
     let any = covered.iter().any(|&c| c);
     let mut vals: Vec<f32> = (0..n)
@@ -70,18 +71,23 @@ pub fn encode_albedo(
 /// Encode a coverage mask as an 8-bit grey PNG (255 = seen by a frame, 0 = not).
 pub fn encode_coverage(covered: &[bool], width: u32, height: u32) -> Result<Vec<u8>> {
     if covered.len() != width as usize * height as usize {
-        return Err(Error::Other(format!(
-            "coverage encoding: a {width}x{height} atlas needs {} flags, got {}",
-            width as usize * height as usize,
-            covered.len()
-        )));
+        return Err(ImageError::BufferSize {
+            stage: "coverage encoding",
+            what: "the coverage flags",
+            got: covered.len(),
+            expected: width as usize * height as usize,
+        }
+        .into());
     }
     let data: Vec<u8> = covered.iter().map(|&c| if c { 255 } else { 0 }).collect();
     encode_png(width, height, png::ColorType::Grayscale, &data, false)
 }
 
 fn encode_png(w: u32, h: u32, color: png::ColorType, data: &[u8], srgb: bool) -> Result<Vec<u8>> {
-    let failed = |e: png::EncodingError| Error::Other(format!("PNG encoding failed: {e}"));
+    let failed = |e: png::EncodingError| ImageError::Encoding {
+        stage: "texture PNG".into(),
+        message: e.to_string(),
+    };
     let mut out = Vec::new();
     {
         let mut enc = png::Encoder::new(&mut out, w, h);

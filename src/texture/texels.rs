@@ -3,7 +3,8 @@
 //! bounding spheres of blocks of texels for per-frame culling.
 
 use super::atlas::TexelGeometry;
-use crate::{Error, Result};
+use crate::mesh::GeometryError;
+use crate::Result;
 
 /// Texels per culling block: small enough that a block is a compact surface patch, large enough
 /// that the per-block test is negligible next to the per-texel work.
@@ -61,7 +62,13 @@ impl TexelSet {
     /// texels are not ordered by chart.
     pub fn new(geo: &TexelGeometry) -> Result<TexelSet> {
         let n = geo.texel.len();
-        let bad = |m: String| Err(Error::Other(format!("texel set: {m}")));
+        let bad = |message: String| {
+            Err(GeometryError::Degenerate {
+                stage: "texel set",
+                message,
+            }
+            .into())
+        };
         if geo.point.len() != n || geo.normal.len() != n || geo.chart.len() != n {
             return bad(format!(
                 "{n} texels but {} points, {} normals and {} chart ids",

@@ -10,9 +10,10 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
+use super::error::VolumeError;
 use crate::volume::morphology::distance_transform_sq;
 use crate::volume::Volume;
-use crate::{Error, Result};
+use crate::Result;
 
 /// The 26 neighbour offsets (voxels) and their lengths (mm) for voxel spacing `sp` (mm).
 pub fn neighbours(sp: [f64; 3]) -> Vec<([i64; 3], f32)> {
@@ -147,16 +148,15 @@ pub fn centred_path(
 ) -> Result<Vec<usize>> {
     let n = mask.len();
     if dt_inside_mm.len() != n {
-        return Err(Error::Other(format!(
-            "centred path: {} distances for a mask of {n} voxels",
-            dt_inside_mm.len()
-        )));
+        return Err(VolumeError::DataLength {
+            got: dt_inside_mm.len(),
+            dims: mask.dims,
+        }
+        .into());
     }
     for (what, v) in [("start", start), ("target", target)] {
         if v >= n || mask.data[v] == 0 {
-            return Err(Error::Other(format!(
-                "centred path: the {what} voxel {v} is not inside the mask"
-            )));
+            return Err(VolumeError::OutsideMask { what, voxel: v }.into());
         }
     }
     let nb = neighbours(mask.spacing());
@@ -171,11 +171,8 @@ pub fn centred_path(
             l / (d * d)
         },
     );
-    sp.path_to(target).ok_or_else(|| {
-        Error::Other(format!(
-            "centred path: voxel {target} is not connected to voxel {start} inside the mask"
-        ))
-    })
+    sp.path_to(target)
+        .ok_or_else(|| VolumeError::NotConnected { start, target }.into())
 }
 
 #[cfg(test)]

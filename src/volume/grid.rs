@@ -1,7 +1,8 @@
 //! [`Volume<T>`]: a 3-D voxel grid with its index→world affine.
 
+use super::error::VolumeError;
 use crate::math::{transform_point, Affine, Point3};
-use crate::{Error, Result};
+use crate::Result;
 
 /// A 3-D voxel grid. Voxel `(i, j, k)` is stored at `i + nx * (j + ny * k)` (x fastest, as in
 /// NIfTI and DICOM), and its centre lies at `affine * (i, j, k, 1)` in world mm (RAS+).
@@ -28,19 +29,16 @@ impl<T: Copy> Volume<T> {
     /// Wrap `data` (x fastest); fails when its length is not `nx*ny*nz` or the affine is singular.
     pub fn from_data(dims: [usize; 3], affine: Affine, data: Vec<T>) -> Result<Self> {
         if data.len() != dims[0] * dims[1] * dims[2] {
-            return Err(Error::Other(format!(
-                "volume data has {} values, but dims {:?} need {}",
-                data.len(),
+            return Err(VolumeError::DataLength {
+                got: data.len(),
                 dims,
-                dims[0] * dims[1] * dims[2]
-            )));
+            }
+            .into());
         }
         if !affine.iter().all(|v| v.is_finite())
             || affine.fixed_view::<3, 3>(0, 0).determinant().abs() < 1e-12
         {
-            return Err(Error::Other(format!(
-                "volume affine is singular or non-finite: {affine}"
-            )));
+            return Err(VolumeError::SingularAffine.into());
         }
         Ok(Volume { dims, affine, data })
     }

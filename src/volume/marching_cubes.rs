@@ -8,11 +8,12 @@
 
 use rayon::prelude::*;
 
+use super::error::VolumeError;
 use super::mc_tables::TRI_TABLE;
 use super::Volume;
 use crate::math::{Affine, Point3};
 use crate::mesh::TriMesh;
-use crate::{Error, Result};
+use crate::Result;
 
 /// Cell layers per slab: large enough that the one duplicated slice per slab costs little.
 const MIN_SLAB_LAYERS: usize = 8;
@@ -29,16 +30,17 @@ const MIN_SLAB_LAYERS: usize = 8;
 pub fn marching_cubes(vol: &Volume<f32>, iso: f32, region: Option<&Volume<u8>>) -> Result<TriMesh> {
     if let Some(r) = region {
         if r.dims != vol.dims {
-            return Err(Error::Other(format!(
-                "marching cubes: region dims {:?} differ from the volume's {:?}",
-                r.dims, vol.dims
-            )));
+            return Err(VolumeError::GridMismatch {
+                stage: "marching cubes",
+                what: "region",
+                got: r.dims,
+                expected: vol.dims,
+            }
+            .into());
         }
     }
     if !iso.is_finite() {
-        return Err(Error::Other(format!(
-            "marching cubes: iso level {iso} is not finite"
-        )));
+        return Err(VolumeError::BadIsoLevel(iso).into());
     }
     let [nx, ny, nz] = vol.dims;
     if nx < 2 || ny < 2 || nz < 2 {

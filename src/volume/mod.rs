@@ -1,6 +1,7 @@
 //! Voxel volumes with their index→world affine, and airway segmentation.
 
 pub mod branches;
+pub mod error;
 pub mod geodesic;
 mod grid;
 pub mod marching_cubes;
@@ -10,5 +11,6 @@ pub mod region_grow;
 pub mod seed;
 pub mod segment;
 
+pub use error::VolumeError;
 pub use grid::{orientation_code, Volume};
 pub use marching_cubes::marching_cubes;

@@ -1,8 +1,9 @@
 //! 6-connected region growing: a scanline flood fill on the flat voxel array, and the
 //! adaptive threshold with explosion control (Mori et al. 1996; Schlathoelter et al. 2002).
 
+use super::error::VolumeError;
 use super::Volume;
-use crate::{Error, Result};
+use crate::Result;
 
 /// Scanline flood fill over 6-connected voxels for which `pass(index)` holds and `label` is 0.
 ///
@@ -111,16 +112,18 @@ pub fn connected_threshold(
 
 fn check_seed(vol: &Volume<f32>, seed: [usize; 3]) -> Result<()> {
     if (0..3).any(|a| seed[a] >= vol.dims[a]) {
-        return Err(Error::Other(format!(
-            "region growing: seed {seed:?} is outside the grid {:?}",
-            vol.dims
-        )));
+        return Err(VolumeError::SeedOutsideGrid {
+            seed,
+            dims: vol.dims,
+        }
+        .into());
     }
     if vol.len() >= u32::MAX as usize {
-        return Err(Error::Other(format!(
-            "region growing: grid {:?} has more than 2^32 voxels",
-            vol.dims
-        )));
+        return Err(VolumeError::GridTooLarge {
+            stage: "region growing",
+            dims: vol.dims,
+        }
+        .into());
     }
     Ok(())
 }
@@ -190,15 +193,17 @@ pub fn grow_adaptive(
     let bad =
         !(opts.step_hu > 0.0) || !(opts.max_hu >= opts.start_hu) || !(opts.leak_growth_limit > 1.0);
     if bad {
-        return Err(Error::Other(format!(
-            "region growing: need step_hu > 0, max_hu >= start_hu and leak_growth_limit > 1 (got {opts:?})"
-        )));
+        return Err(VolumeError::BadThresholds {
+            start_hu: opts.start_hu,
+            max_hu: opts.max_hu,
+            step_hu: opts.step_hu,
+            leak_growth_limit: opts.leak_growth_limit,
+        }
+        .into());
     }
     let n_steps = ((opts.max_hu - opts.start_hu) / opts.step_hu).floor() as usize + 1;
     if n_steps > 254 {
-        return Err(Error::Other(format!(
-            "region growing: {n_steps} threshold steps, at most 254 are supported"
-        )));
+        return Err(VolumeError::TooManySteps { steps: n_steps }.into());
     }
     let sp = vol.spacing();
     let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
@@ -244,22 +249,19 @@ pub fn grow_adaptive(
         steps.len() - 1
     };
     if exploded && steps.len() < 2 {
-        return Err(Error::Other(format!(
-            "region growing: the region exploded already at the first threshold {} HU (seed {seed:?} not in an airway?)",
-            opts.start_hu
-        )));
+        return Err(VolumeError::ExplodedAtStart {
+            start_hu: opts.start_hu,
+            seed,
+        }
+        .into());
     }
     if steps[chosen].voxels == 0 {
-        let v = vol.get(seed[0], seed[1], seed[2]);
-        let value = if v.is_finite() {
-            format!("{v} HU")
-        } else {
-            "not a finite number, counted as tissue".to_string()
-        };
-        return Err(Error::Other(format!(
-            "region growing: seed {seed:?} ({value}) is above every threshold up to {} HU",
-            steps[chosen].hu
-        )));
+        return Err(VolumeError::SeedNotAir {
+            seed,
+            value: vol.get(seed[0], seed[1], seed[2]),
+            max_hu: steps[chosen].hu,
+        }
+        .into());
     }
     let keep = chosen as u8 + 1;
     for v in label.iter_mut() {

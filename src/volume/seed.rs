@@ -1,9 +1,10 @@
 //! Automatic trachea seed: a round air region, enclosed by tissue, near the body's centre
 //! line, found in consecutive upper axial slices.
 
+use super::error::VolumeError;
 use super::Volume;
 use crate::math::{Point3, Vector3};
-use crate::{Error, Result};
+use crate::Result;
 
 /// How the trachea is looked for. HU are Hounsfield units, lengths mm.
 #[derive(Clone, Debug)]
@@ -221,9 +222,9 @@ pub fn find_trachea_seed(ct: &Volume<f32>, opts: &SeedOptions) -> Result<Trachea
             }
         }
     }
-    Err(Error::Other(format!(
-        "trachea seed: no round air region enclosed by tissue near the body centre over {} mm of the top {:.0}% of the slices; give --seed X,Y,Z",
-        opts.min_run_mm,
-        opts.search_fraction * 100.0
-    )))
+    Err(VolumeError::NoTracheaSeed {
+        min_run_mm: opts.min_run_mm,
+        search_fraction: opts.search_fraction,
+    }
+    .into())
 }

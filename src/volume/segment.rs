@@ -2,12 +2,13 @@
 //! morphological clean-up, and a summary (volume, branches, thresholds).
 
 use super::branches::{count_branches, BranchCountOptions};
+use super::error::VolumeError;
 use super::morphology::{close, component_of, fill_holes};
 use super::region_grow::{grow_adaptive, AdaptiveOptions, ThresholdStep};
 use super::seed::{find_trachea_seed, SeedOptions};
 use super::Volume;
 use crate::math::{Point3, Vector4};
-use crate::{Error, Result};
+use crate::Result;
 use rayon::prelude::*;
 use std::borrow::Cow;
 
@@ -104,10 +105,11 @@ pub fn segment_airway(ct: &Volume<f32>, opts: &SegmentOptions) -> Result<Segment
         Some(w) => {
             let v = ct.voxel_at_world(w).ok_or_else(|| {
                 let (lo, hi) = ct.world_bounds();
-                Error::Other(format!(
-                    "seed ({:.1}, {:.1}, {:.1}) mm is outside the CT, which spans ({:.1}, {:.1}, {:.1})..({:.1}, {:.1}, {:.1}) mm",
-                    w.x, w.y, w.z, lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
-                ))
+                VolumeError::SeedOutsideCt {
+                    seed: w.coords.into(),
+                    lo: lo.coords.into(),
+                    hi: hi.coords.into(),
+                }
             })?;
             (v, false)
         }
@@ -119,8 +121,10 @@ pub fn segment_airway(ct: &Volume<f32>, opts: &SegmentOptions) -> Result<Segment
     let margin = opts.closing_radius_mm.max(0.0);
     let sp = ct.spacing();
     let pad = [0, 1, 2].map(|a| (margin / sp[a]).ceil() as usize + 2);
-    let (lo, hi) = bounding_box(&g.mask)
-        .ok_or_else(|| Error::Other("region growing produced an empty region".into()))?;
+    let (lo, hi) = bounding_box(&g.mask).ok_or(VolumeError::Empty {
+        stage: "segmentation",
+        what: "grown region",
+    })?;
     let lo = [0, 1, 2].map(|a| lo[a].saturating_sub(pad[a]));
     let hi = [0, 1, 2].map(|a| (hi[a] + pad[a]).min(ct.dims[a] - 1));
     let mut sub = crop(&g.mask, lo, hi);

@@ -101,10 +101,13 @@ pub fn flythrough(
     opts: &FlythroughOptions,
 ) -> Result<FlythroughSummary> {
     if opts.frames < 2 || opts.fps == 0 {
-        return Err(Error::Other(format!(
-            "flythrough: need at least 2 frames and a positive frame rate (got {} frames, {} fps)",
-            opts.frames, opts.fps
-        )));
+        return Err(Error::BadOptions {
+            stage: "flythrough",
+            message: format!(
+                "need at least 2 frames and a positive frame rate (got {} frames, {} fps)",
+                opts.frames, opts.fps
+            ),
+        });
     }
     let model = Model::load(model_dir)?;
     let seg_path = model_dir.join("segmentation.nii.gz");

@@ -162,8 +162,7 @@ pub fn segment_command(
         },
     };
     summary.seconds.write = t.elapsed().as_secs_f64();
-    let json = serde_json::to_string_pretty(&summary).map_err(|e| Error::Other(e.to_string()))?;
-    crate::io::atomic::write_bytes_atomic(&out_dir.join("summary.json"), json.as_bytes())?;
+    crate::io::atomic::write_json_atomic(&out_dir.join("summary.json"), &summary)?;
     out_dir.commit()?;
     Ok(summary)
 }

@@ -2,6 +2,8 @@
 //! each chart (never across charts, so a chart's filler comes only from its own surface), then
 //! into the gutter (so mip-mapping and filtering at chart borders never read black).
 
+use crate::image::ImageError;
+
 /// Fill the uncovered texels of an RGB atlas in place.
 ///
 /// * `rgb`: `width * height * 3` linear RGB values, row-major; values of uncovered texels are
@@ -25,14 +27,13 @@ pub fn fill_uncovered(
 ) -> crate::Result<()> {
     let n = width * height;
     if rgb.len() != 3 * n || covered.len() != n || chart_of_texel.len() != n {
-        return Err(crate::Error::Other(format!(
-            "fill_uncovered: a {width}x{height} atlas needs {} RGB values and {n} mask entries, \
-             got {}, {} and {}",
-            3 * n,
-            rgb.len(),
-            covered.len(),
-            chart_of_texel.len()
-        )));
+        return Err(ImageError::BufferSize {
+            stage: "atlas hole filling",
+            what: "the atlas (RGB values / 3, coverage flags or chart ids)",
+            got: (rgb.len() / 3).min(covered.len()).min(chart_of_texel.len()),
+            expected: n,
+        }
+        .into());
     }
     let mut filled: Vec<bool> = covered.to_vec();
     // Stage 1: within charts.

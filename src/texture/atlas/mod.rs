@@ -14,8 +14,9 @@ pub use fill::fill_uncovered;
 pub use raster::{rasterize_texels, TexelGeometry};
 
 use crate::math::Point3;
+use crate::mesh::error::GeometryError;
 use crate::mesh::TriMesh;
-use crate::{Error, Result};
+use crate::Result;
 use charts::FaceData;
 use lscm::ChartUv;
 
@@ -141,11 +142,13 @@ pub fn build_atlas(mesh: &TriMesh, opts: &AtlasOptions) -> Result<Atlas> {
         .collect();
     let (width, placements, height) = pack_best(&fps)?;
     if width > opts.max_size as usize || height > opts.max_size as usize {
-        return Err(Error::Other(format!(
-            "build_atlas: a {width}x{height} atlas exceeds max_size {} at texel_mm {}: use \
-             larger texels",
-            opts.max_size, opts.texel_mm
-        )));
+        return Err(GeometryError::AtlasTooLarge {
+            width: width as u32,
+            height: height as u32,
+            max_size: opts.max_size,
+            texel_mm: opts.texel_mm,
+        }
+        .into());
     }
     Ok(assemble(
         mesh,
@@ -159,7 +162,13 @@ pub fn build_atlas(mesh: &TriMesh, opts: &AtlasOptions) -> Result<Atlas> {
 }
 
 fn validate(mesh: &TriMesh, opts: &AtlasOptions) -> Result<()> {
-    let bad = |m: String| Err(Error::Other(format!("build_atlas: {m}")));
+    let bad = |message: String| {
+        Err(GeometryError::BadOptions {
+            stage: "texture atlas",
+            message,
+        }
+        .into())
+    };
     if mesh.triangles.is_empty() {
         return bad("the mesh has no triangles".into());
     }
@@ -253,7 +262,13 @@ fn pack_best(fps: &[pack::Footprint]) -> Result<(usize, Vec<pack::Placement>, us
         .into_par_iter()
         .filter_map(|w| pack::raster_pack(fps, w).map(|(p, h)| (w, p, h)))
         .min_by_key(|(w, _, h)| (w * h, *w.max(h)))
-        .ok_or_else(|| Error::Other("build_atlas: no chart fits the atlas width".into()))
+        .ok_or_else(|| {
+            GeometryError::Degenerate {
+                stage: "texture atlas",
+                message: "no chart fits the atlas width".into(),
+            }
+            .into()
+        })
 }
 
 fn assemble(

@@ -8,8 +8,9 @@
 use rayon::prelude::*;
 
 use super::Atlas;
+use crate::mesh::GeometryError;
 use crate::mesh::TriMesh;
-use crate::{Error, Result};
+use crate::Result;
 
 /// Geometry of every texel that carries chart data, as parallel arrays (one entry per texel,
 /// ordered by chart, then row, then column).
@@ -141,13 +142,17 @@ pub fn rasterize_texels(atlas: &Atlas, mesh: &TriMesh) -> Result<TexelGeometry> 
             .zip(&atlas.mesh.triangles)
             .any(|(m, a)| (0..3).any(|k| atlas.original_vertex.get(a[k] as usize) != Some(&m[k])))
     {
-        return Err(Error::Other(format!(
-            "rasterize_texels: the mesh ({} triangles, {} vertices) is not the one the atlas was \
-             built from ({} triangles)",
-            mesh.triangles.len(),
-            mesh.positions.len(),
-            atlas.mesh.triangles.len()
-        )));
+        return Err(GeometryError::Degenerate {
+            stage: "texel rasterisation",
+            message: format!(
+                "the mesh ({} triangles, {} vertices) is not the one the atlas was built from \
+                 ({} triangles)",
+                mesh.triangles.len(),
+                mesh.positions.len(),
+                atlas.mesh.triangles.len()
+            ),
+        }
+        .into());
     }
     let normals = mesh.vertex_normals();
     let (w, h) = (atlas.width as usize, atlas.height as usize);

@@ -8,6 +8,7 @@
 //! used); the calibrated light's rho and s are shared by all frames (7 numbers fitted on the
 //! whole video; the held-out frame's own gain is replaced by the gain fit of the comparison).
 
+use super::error::BuildError;
 use super::options::BuildOptions;
 use super::scene::BuildScene;
 use crate::image::Frame;
@@ -20,7 +21,7 @@ use crate::render::{
 use crate::shading::paper::{PsiLookup, PsiModel};
 use crate::shading::{FittedShading, ShadingKind};
 use crate::texture::fusion::fuse;
-use crate::{Error, Result};
+use crate::Result;
 
 /// The held-out frames: every `every`-th frame starting at `every / 2`, at most `max` of them
 /// (evenly thinned), so that both neighbours of each are training frames.
@@ -45,9 +46,7 @@ pub fn cross_validate(
     let every = opts.cross_validate_every;
     let held = held_out_frames(n, every, opts.cross_validate_max_frames);
     if held.is_empty() {
-        return Err(Error::Other(format!(
-            "cross-validation: {n} frames are too few to hold out every {every}-th"
-        )));
+        return Err(BuildError::TooFewFramesToHoldOut { frames: n, every }.into());
     }
     let train: Vec<usize> = (0..n).filter(|i| !held.contains(i)).collect();
     let frames = held_out_observations(scene, &held, opts)?;

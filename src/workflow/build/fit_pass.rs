@@ -2,6 +2,7 @@
 //! cast from its pose, its pixels that obey the model are sampled, the paper's Psi is fitted
 //! to them, and a subsample is pooled for the calibrated light.
 
+use super::error::BuildError;
 use super::light_refit::sample_uvs;
 use super::options::BuildOptions;
 use super::scene::BuildScene;
@@ -12,10 +13,11 @@ use crate::model::manifest::FrameFit;
 use crate::raycast::{cast_frame_with, GBuffer};
 use crate::shading::calibrated::{pool_frames, FrameData, PoolOptions, PooledSamples};
 use crate::shading::paper::{fit_psi, PsiModel};
+use crate::shading::ExclusionCounts;
 use crate::shading::{density_weights, extract_samples, SampleSet, WeightOptions};
 use crate::workflow::progress::Progress;
 use crate::workflow::report::ReportFrame;
-use crate::{Error, Result};
+use crate::Result;
 
 /// What the first pass gives every later stage.
 pub struct FitPass {
@@ -68,8 +70,20 @@ pub fn fit_pass(scene: &mut BuildScene, opts: &BuildOptions) -> Result<(FitPass,
         let frame = frame?;
         let pose = scene.poses[i];
         let g = cast_frame_with(&scene.scene, &scene.rays, &pose);
-        let (samples, model, mut fit) = fit_frame(&frame, &g, &pose, opts)
-            .map_err(|e| Error::Other(format!("frame {i} ({}): {e}", scene.frame_name(i))))?;
+        let (samples, model, mut fit) =
+            fit_frame(&frame, &g, &pose, opts).map_err(|e| match e {
+                FrameFitError::Unusable(samples, excluded) => BuildError::FrameUnusable {
+                    frame: i,
+                    name: scene.frame_name(i),
+                    samples,
+                    excluded,
+                },
+                FrameFitError::Fit(e) => BuildError::FrameFit {
+                    frame: i,
+                    name: scene.frame_name(i),
+                    source: Box::new(e),
+                },
+            })?;
         fit.frame = i;
         for (ch, sum) in pass.pixel_sum.iter_mut().enumerate() {
             *sum += samples.rgb[ch].iter().map(|&v| v as f64).sum::<f64>();
@@ -107,23 +121,27 @@ pub fn fit_pass(scene: &mut BuildScene, opts: &BuildOptions) -> Result<(FitPass,
     Ok((pass, light))
 }
 
+/// Why a frame could not be fitted.
+enum FrameFitError {
+    /// Too few pixels obey the model (their count, and why the others were left out).
+    Unusable(usize, ExclusionCounts),
+    /// The fit itself failed.
+    Fit(crate::Error),
+}
+
 /// The pixels of a frame that obey the model, and the fitted Psi.
 fn fit_frame(
     frame: &Frame,
     g: &GBuffer,
     pose: &Affine,
     opts: &BuildOptions,
-) -> Result<(SampleSet, PsiModel, FrameFit)> {
+) -> std::result::Result<(SampleSet, PsiModel, FrameFit), FrameFitError> {
     let samples = extract_samples(&g.gamma, &g.z, &frame.rgb, &opts.samples);
     if samples.len() < 50 {
-        return Err(Error::Other(format!(
-            "too few pixels obey the shading model ({} samples; excluded: {}): is the pose registered to the CT?",
-            samples.len(),
-            samples.excluded
-        )));
+        return Err(FrameFitError::Unusable(samples.len(), samples.excluded));
     }
     let weights = density_weights(&samples, &WeightOptions::default());
-    let fit = fit_psi(&samples, &weights.weights, &opts.fit)?;
+    let fit = fit_psi(&samples, &weights.weights, &opts.fit).map_err(FrameFitError::Fit)?;
     let mut model = fit.model;
     model.camera_to_world = Pose::new(*pose).row_major();
     let r2 = r_squared(&samples, &model);

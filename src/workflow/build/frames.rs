@@ -2,6 +2,7 @@
 //! source (never all in memory), each with its depth buffer (cached from the fit pass while
 //! the cache fits its memory budget, else ray cast again) and its fitted shading.
 
+use super::error::BuildError;
 use super::scene::BuildScene;
 use crate::image::Frame;
 use crate::io::frame_source::FrameSource;
@@ -10,7 +11,7 @@ use crate::shading::FrameShaders;
 use crate::texture::delight::Observation;
 use crate::texture::fusion::FrameStream;
 use crate::workflow::progress::Progress;
-use crate::{Error, Result};
+use crate::Result;
 
 /// Depth buffers kept from the fit pass, up to a memory budget.
 pub struct DepthCache {
@@ -85,18 +86,19 @@ impl FrameStream for CaseFrames<'_> {
     }
 
     fn observation(&mut self, k: usize) -> Result<Observation<'_>> {
-        let index = *self
-            .subset
-            .get(k)
-            .ok_or_else(|| Error::Other(format!("frame {k} of {} asked for", self.subset.len())))?;
+        let index = *self.subset.get(k).ok_or(BuildError::FrameMissing {
+            frame: k,
+            frames: self.subset.len(),
+        })?;
         if self.source.is_none() || index < self.next {
             self.source = Some(self.scene.case.frame_source()?);
             self.next = 0;
         }
         let src = self.source.as_mut().expect("opened above");
         while self.next <= index {
-            let f = src.next().ok_or_else(|| {
-                Error::Other(format!("frame {index} missing from the frame source"))
+            let f = src.next().ok_or(BuildError::FrameMissing {
+                frame: index,
+                frames: self.next,
             })??;
             if self.next == index {
                 self.frame = f;

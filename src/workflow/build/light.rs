@@ -6,6 +6,7 @@
 //! 4. refits of the light's shape with the fused texture's albedo, each followed by one more
 //!    gain correction ([`super::light_refit`], `--light-refits`).
 
+use super::error::BuildError;
 use super::fit_pass::LightSamples;
 use super::frames::CaseFrames;
 use super::gain_correction::correct_gains;
@@ -19,7 +20,7 @@ use crate::shading::calibrated::{
 };
 use crate::shading::{ShadingKind, WeightOptions};
 use crate::texture::fusion::{fuse, FusedTexture, FusionMethod, FusionOptions};
-use crate::{Error, Result};
+use crate::Result;
 
 /// The fitted light and how it was fitted (model.json's `light_fit`).
 pub struct CalibratedLight {
@@ -52,7 +53,7 @@ pub fn calibrated_light(
     let mut model = match fit_calibrated(&samples.pooled, &density, &cal_opts) {
         Ok(fit) => fit.model,
         Err(e) if opts.shading == Some(ShadingKind::Calibrated) => {
-            return Err(Error::Other(format!("calibrated light fit: {e}")))
+            return Err(BuildError::CalibratedLight(Box::new(e)).into())
         }
         Err(e) => {
             warnings.push(format!(

@@ -14,6 +14,7 @@
 //! returns its own plain output, and one line in [`build_model`].
 
 mod cross_validation;
+mod error;
 mod fit_pass;
 pub mod frames;
 mod gain_correction;
@@ -25,6 +26,7 @@ mod textures;
 mod write;
 
 pub use cross_validation::held_out_frames;
+pub use error::BuildError;
 pub use fit_pass::{FitPass, LightSamples};
 pub use gain_correction::refine_gains_against_texture;
 pub use light::CalibratedLight;
