@@ -130,8 +130,8 @@ pub fn fit_psi(samples: &SampleSet, weights: &[f32], opts: &FitOptions) -> Resul
     }
     if !(samples.z_max > samples.z_min) {
         return Err(ShadingError::EmptyDepthRange {
-            z_min: f64::from(samples.z_min),
-            z_max: f64::from(samples.z_max),
+            z_min: samples.z_min,
+            z_max: samples.z_max,
         }
         .into());
     }
