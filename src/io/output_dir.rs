@@ -1,7 +1,8 @@
 //! Output folders written atomically: everything goes into a temporary folder beside the
 //! target, which replaces the target only when complete. A failed or interrupted run never
 //! leaves a half-written result that looks whole, and an existing result is replaced only
-//! with `force`.
+//! with `force`. A temporary folder left by a run that was killed is removed by the next run
+//! for the same target (its name carries the writing process's id).
 
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -33,8 +34,15 @@ impl OutputDir {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
+        let prefix = format!(".{name}.partial-");
+        for stale in remove_stale_partials(&parent, &prefix) {
+            eprintln!(
+                "note: removed {}, left by an interrupted run",
+                stale.display()
+            );
+        }
         let staging = tempfile::Builder::new()
-            .prefix(&format!(".{name}.partial-"))
+            .prefix(&format!("{prefix}{}-", std::process::id()))
             .tempdir_in(&parent)
             .map_err(|e| Error::io(&parent, e))?;
         Ok(OutputDir {
@@ -92,6 +100,41 @@ impl OutputDir {
     }
 }
 
+/// Remove the folders `parent/<prefix><pid>-*` whose process `pid` no longer runs (and those
+/// without a process id, from older versions); returns what was removed. A folder that cannot
+/// be read or removed is left alone: it is only a leftover.
+fn remove_stale_partials(parent: &Path, prefix: &str) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(parent) else {
+        return Vec::new();
+    };
+    let mut removed = Vec::new();
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(rest) = name.strip_prefix(prefix) else {
+            continue;
+        };
+        let owner = rest.split('-').next().and_then(|p| p.parse::<u32>().ok());
+        if owner.is_some_and(process_runs) {
+            continue;
+        }
+        let path = entry.path();
+        if path.is_dir() && std::fs::remove_dir_all(&path).is_ok() {
+            removed.push(path);
+        }
+    }
+    removed
+}
+
+/// True when process `pid` exists (on Linux, its /proc entry); elsewhere every process is
+/// assumed to run, so nothing another run may still be writing is removed.
+fn process_runs(pid: u32) -> bool {
+    if cfg!(target_os = "linux") {
+        Path::new(&format!("/proc/{pid}")).exists()
+    } else {
+        true
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -124,5 +167,27 @@ mod tests {
             "two"
         );
         assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn a_killed_runs_partial_folder_is_removed_and_a_running_ones_kept() {
+        let tmp = tempfile::tempdir().unwrap();
+        let target = tmp.path().join("model");
+        // pid 0 never names a user process: its folder is a leftover. Ours is alive.
+        let dead = tmp.path().join(".model.partial-0-abc");
+        let alive = tmp
+            .path()
+            .join(format!(".model.partial-{}-xyz", std::process::id()));
+        let other = tmp.path().join(".other.partial-0-abc");
+        for d in [&dead, &alive, &other] {
+            std::fs::create_dir_all(d.join("sub")).unwrap();
+        }
+        let out = OutputDir::create(&target, false).unwrap();
+        assert!(!dead.exists(), "a dead run's folder is removed");
+        assert!(
+            alive.exists() && other.exists(),
+            "live and unrelated folders stay"
+        );
+        out.commit().unwrap();
     }
 }

@@ -1,5 +1,11 @@
 //! Safe resolution of relative paths found inside input files (poses.json `"image"`,
-//! views.json outputs): a path may only name something inside its base folder.
+//! views.json outputs): a path written in a file may only name something inside its base
+//! folder.
+//!
+//! The rule is lexical: no absolute paths, no `..` climbing above the base folder. Symbolic
+//! links that the user placed inside the folder are followed wherever they point (a case's
+//! `frames/` linked to a data disk is common on clusters): the folder's owner chose them,
+//! whereas a path in a poses.json may come from anywhere.
 
 use std::path::{Component, Path, PathBuf};
 
@@ -8,12 +14,10 @@ use crate::{Error, Result};
 /// Resolve `rel`, a path written in `file_for_errors`, against `base_dir` and refuse anything
 /// that could reach outside `base_dir`.
 ///
-/// Refused: an empty path, an absolute path (or one with a root or drive prefix), `..`
-/// components that climb above `base_dir`, and — for the part of the path that already exists —
-/// symbolic links whose canonical target lies outside the canonical `base_dir`. The file itself
-/// need not exist (outputs are resolved before they are written): then its deepest existing
-/// ancestor is checked. Returns `base_dir` joined with the lexically normalised `rel` (no `.` or
-/// `..` left), not the canonical path, so messages show the names the user wrote.
+/// Refused: an empty path, an absolute path (or one with a root or drive prefix), and `..`
+/// components that climb above `base_dir`. The file need not exist (outputs are resolved before
+/// they are written). Returns `base_dir` joined with the lexically normalised `rel` (no `.` or
+/// `..` left), so messages show the names the user wrote.
 pub fn resolve_inside(base_dir: &Path, rel: &str, file_for_errors: &Path) -> Result<PathBuf> {
     let refuse = |why: &str| Error::invalid(file_for_errors, format!("path {rel:?} {why}"));
     if rel.is_empty() {
@@ -42,33 +46,7 @@ pub fn resolve_inside(base_dir: &Path, rel: &str, file_for_errors: &Path) -> Res
     if normal.as_os_str().is_empty() {
         return Err(refuse("names the folder itself, not a file"));
     }
-    let joined = base_dir.join(&normal);
-
-    // Symlinks: compare canonical forms. Without a canonical base (folder not created yet)
-    // nothing inside it can be a link, so the lexical check above is complete.
-    if let Ok(base_canonical) = base_dir.canonicalize() {
-        let mut existing = joined.as_path();
-        loop {
-            if let Ok(canonical) = existing.canonicalize() {
-                if !canonical.starts_with(&base_canonical) {
-                    return Err(refuse(&format!(
-                        "leads outside its folder through a symbolic link (to {})",
-                        canonical.display()
-                    )));
-                }
-                break;
-            }
-            // A dangling symlink cannot be canonicalised: refuse it rather than guess its target.
-            if existing.symlink_metadata().is_ok() {
-                return Err(refuse("is a dangling symbolic link"));
-            }
-            match existing.parent() {
-                Some(parent) if parent.starts_with(base_dir) => existing = parent,
-                _ => break,
-            }
-        }
-    }
-    Ok(joined)
+    Ok(base_dir.join(&normal))
 }
 
 /// [`resolve_inside`] for paths inside a case folder (CASE_FORMAT.md), e.g. poses.json images.
