@@ -417,6 +417,7 @@ fn baselines_reproduce_a_training_view_and_follow_inverse_square() {
         .map(|(frame, p)| TrainingView {
             frame,
             camera_to_world: p,
+            image_mask: None,
         })
         .collect();
     // Seen from the second training pose itself, (a) is that frame on every hit pixel.

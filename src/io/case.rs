@@ -6,6 +6,7 @@ use crate::image::Frame;
 use crate::io::camera_file::{find_camera, read_camera};
 use crate::io::ct::{find_ct, read_ct, CtInfo, CtSource};
 use crate::io::frame_source::FrameSource;
+use crate::io::image_mask::{read_case_mask, ImageMask};
 use crate::io::poses::{read_poses, FrameRef, PoseEntry};
 use crate::io::video::VideoReader;
 use crate::volume::Volume;
@@ -76,6 +77,8 @@ pub struct Case {
     pub poses: Vec<PoseEntry>,
     /// Where the frames are.
     pub frames: FramesLocation,
+    /// Which pixels of every frame are image (`mask.png`); `None`: all of them.
+    pub mask: Option<ImageMask>,
 }
 
 impl Case {
@@ -96,6 +99,7 @@ impl Case {
         }
         let poses = read_poses(&poses_path, dir)?;
         let frames = locate_frames(dir, &poses_path, &poses, &camera)?;
+        let mask = read_case_mask(dir, &camera)?;
         let ct_source = find_ct(dir)?;
         let (ct, ct_info) = read_ct(&ct_source)?;
         Ok(Case {
@@ -108,6 +112,7 @@ impl Case {
             poses_path,
             poses,
             frames,
+            mask,
         })
     }
 

@@ -13,6 +13,7 @@ use super::albedo::MucosaAlbedo;
 use super::ct_volume::{make_ct_phantom, CtPhantomOptions};
 use super::from_mask::{ct_from_mask_file, FromMaskOptions};
 use super::mask_path::mask_centreline;
+use super::overlay::ScopeOverlay;
 use super::path::{camera_path, novel_views, tree_centreline, PathOptions, SmoothPath};
 use super::render::{auto_gain, expose, render_radiance, LightModel, SensorModel, SubpixelRays};
 use super::truth_io::{write_albedo_ply, write_gray16_png, write_gray8_png, write_linear16_png};
@@ -22,6 +23,7 @@ use crate::camera::Pose;
 use crate::image::Frame;
 use crate::io::atomic::write_json_atomic;
 use crate::io::camera_file::write_camera_json;
+use crate::io::image_mask::MASK_FILE;
 use crate::io::mesh_export::write_ply;
 use crate::io::nifti::write_nifti;
 use crate::io::png::write_png_srgb8;
@@ -69,6 +71,9 @@ pub struct PhantomOptions {
     /// Camera path (its `frames` and `seed` are overwritten).
     pub path: PathOptions,
     /// Replace an existing `out` folder.
+    /// Burn a scope's overlay into the frames (black border around an octagonal field of
+    /// view, on-screen text over the image) and write the matching CASE/mask.png.
+    pub scope_overlay: bool,
     pub force: bool,
 }
 
@@ -92,6 +97,7 @@ impl Default for PhantomOptions {
             light: LightModel::default(),
             sensor: SensorModel::default(),
             path: PathOptions::default(),
+            scope_overlay: false,
             force: false,
         }
     }
@@ -261,10 +267,19 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     let mut entries = Vec::with_capacity(poses.len());
     let mut gains = Vec::with_capacity(poses.len());
     let noise_seed = seed.wrapping_mul(7919).wrapping_add(1);
+    let overlay = opts
+        .scope_overlay
+        .then(|| ScopeOverlay::new(opts.width, opts.height));
+    if let Some(o) = &overlay {
+        write_png_srgb8(&dir.join(MASK_FILE), &o.mask())?;
+    }
     for (i, pose) in poses.iter().enumerate() {
         let rad = render_radiance(&scene, &rays, pose, &albedo, &opts.light);
         let gain = auto_gain(&rad.frame, &opts.sensor);
-        let img = expose(&rad.frame, gain, &opts.sensor, true, noise_seed, i as u64);
+        let mut img = expose(&rad.frame, gain, &opts.sensor, true, noise_seed, i as u64);
+        if let Some(o) = &overlay {
+            o.apply(&mut img, i, 25.0);
+        }
         let path = frames_dir.join(format!("{i:06}.png"));
         write_png_srgb8(&path, &img)?;
         let (mean, sat) = frame_stats(&img);

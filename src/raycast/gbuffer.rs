@@ -68,6 +68,21 @@ impl GBuffer {
         self.tri[i] != u32::MAX
     }
 
+    /// Make the pixels where `image` is false (outside a scope's field of view, under burnt-in
+    /// text) see nothing, as pixels without a hit; `image` is row-major, one flag per pixel.
+    pub fn mask_out(&mut self, image: &[bool]) {
+        for (i, _) in image.iter().enumerate().filter(|(_, &m)| !m) {
+            if i < self.tri.len() {
+                self.z[i] = MISS.z;
+                self.point[i] = MISS.point;
+                self.normal[i] = MISS.normal;
+                self.gamma[i] = MISS.gamma;
+                self.tri[i] = MISS.tri;
+                self.bary[i] = MISS.bary;
+            }
+        }
+    }
+
     /// Number of pixels that see the surface.
     pub fn hit_count(&self) -> usize {
         self.tri.iter().filter(|&&t| t != u32::MAX).count()

@@ -24,6 +24,8 @@ pub struct TrainingView<'a> {
     pub frame: &'a Frame,
     /// Camera → world of the frame (world mm).
     pub camera_to_world: &'a Affine,
+    /// Which of its pixels are image (the case's mask.png); `None`: all of them.
+    pub image_mask: Option<&'a [bool]>,
 }
 
 /// Relative depth tolerance of the visibility test (a point is visible in the training frame
@@ -83,7 +85,7 @@ pub fn reproject_nearest_frame(
             let uv = training_camera.project(&q)?;
             let dist =
                 ((p[0] - tc[0]).powi(2) + (p[1] - tc[1]).powi(2) + (p[2] - tc[2]).powi(2)).sqrt();
-            if !visible(&train, uv.x, uv.y, dist) {
+            if !visible(&train, uv.x, uv.y, dist) || !is_image(&tv, uv.x, uv.y) {
                 return None;
             }
             tv.frame.bilinear(uv.x, uv.y)
@@ -100,11 +102,36 @@ pub fn reproject_nearest_frame(
     Ok((frame, mask))
 }
 
+/// True when (`u`, `v`) is within a pixel of a `w` x `h` image (false for NaN): beyond it no
+/// pixel is read, and far-off projections would overflow the integer pixel arithmetic.
+fn near_image(u: f64, v: f64, w: i64, h: i64) -> bool {
+    u >= -1.0 && v >= -1.0 && u <= w as f64 && v <= h as f64
+}
+
+/// True when the (up to four) pixels around (`u`, `v`) that bilinear sampling reads are image.
+fn is_image(tv: &TrainingView, u: f64, v: f64) -> bool {
+    let Some(mask) = tv.image_mask else {
+        return true;
+    };
+    let (w, h) = (tv.frame.width as i64, tv.frame.height as i64);
+    if !near_image(u, v, w, h) {
+        return false;
+    }
+    let (x0, y0) = (u.floor() as i64, v.floor() as i64);
+    [(x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1)]
+        .into_iter()
+        .filter(|&(x, y)| x >= 0 && y >= 0 && x < w && y < h)
+        .all(|(x, y)| mask[(y * w + x) as usize])
+}
+
 /// True when a point at distance `dist` (mm) from the training camera, projecting to pixel
 /// (`u`, `v`), is not hidden: no more than the tolerances behind the farthest surface the
 /// (up to four) surrounding pixel-centre rays hit.
 fn visible(g: &GBuffer, u: f64, v: f64, dist: f32) -> bool {
     let (w, h) = (g.width as i64, g.height as i64);
+    if !near_image(u, v, w, h) {
+        return false;
+    }
     let (x0, y0) = (u.floor() as i64, v.floor() as i64);
     let mut zmax = f32::NEG_INFINITY;
     for (x, y) in [(x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1)] {

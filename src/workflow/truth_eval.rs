@@ -105,6 +105,7 @@ pub fn evaluate_against_truth(
             let tv = TrainingView {
                 frame: &frames[&i],
                 camera_to_world: &poses[i],
+                image_mask: case.mask.as_ref().map(|m| m.image.as_slice()),
             };
             let (frame, mask) = reproject_nearest_frame(
                 &model.scene,

@@ -202,6 +202,10 @@ pub struct PhantomArgs {
     /// Sub-samples per pixel along each axis (antialiasing).
     #[arg(long, default_value_t = PhantomOptions::default().supersample)]
     pub supersample: u32,
+    /// Burn a scope's overlay into the frames (black border around an octagonal field of
+    /// view, on-screen text over the image) and write the matching mask.png.
+    #[arg(long)]
+    pub scope_overlay: bool,
     /// Replace CASE if it exists.
     #[arg(long)]
     pub force: bool,

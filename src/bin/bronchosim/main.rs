@@ -126,6 +126,7 @@ fn phantom(a: PhantomArgs) -> anyhow::Result<String> {
         seed: a.seed,
         anatomy: a.anatomy,
         supersample: a.supersample,
+        scope_overlay: a.scope_overlay,
         force: a.force,
         ..Default::default()
     };

@@ -13,7 +13,6 @@ use super::options::BuildOptions;
 use super::scene::BuildScene;
 use crate::image::Frame;
 use crate::model::manifest::{CrossValidation, HeldOutScore, ModelCrossValidation};
-use crate::raycast::cast_frame_with;
 use crate::render::{
     evaluate_methods, render_view_with, MaskedImage, MipOptions, MipTexture, RenderInputs,
     RenderOptions, ViewRays,
@@ -118,7 +117,7 @@ fn held_out_observations(
     let s = &opts.samples;
     let mut frames = Vec::with_capacity(held.len());
     for (i, f) in scene.case.frames_at(held)? {
-        let g = cast_frame_with(&scene.scene, &scene.rays, &scene.poses[i]);
+        let g = scene.cast(i);
         let mask = (0..g.z.len())
             .map(|p| {
                 let px = &f.rgb[3 * p..3 * p + 3];

@@ -10,7 +10,7 @@ use crate::camera::Pose;
 use crate::image::Frame;
 use crate::math::Affine;
 use crate::model::manifest::FrameFit;
-use crate::raycast::{cast_frame_with, GBuffer};
+use crate::raycast::GBuffer;
 use crate::shading::calibrated::{pool_frames, FrameData, PoolOptions, PooledSamples};
 use crate::shading::paper::{fit_psi, PsiModel};
 use crate::shading::ExclusionCounts;
@@ -69,7 +69,7 @@ pub fn fit_pass(scene: &mut BuildScene, opts: &BuildOptions) -> Result<(FitPass,
     for (i, frame) in scene.case.frame_source()?.enumerate() {
         let frame = frame?;
         let pose = scene.poses[i];
-        let g = cast_frame_with(&scene.scene, &scene.rays, &pose);
+        let g = scene.cast(i);
         let (samples, model, mut fit) =
             fit_frame(&frame, &g, &pose, opts).map_err(|e| match e {
                 FrameFitError::Unusable(samples, excluded) => BuildError::FrameUnusable {

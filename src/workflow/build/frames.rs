@@ -6,7 +6,6 @@ use super::error::BuildError;
 use super::scene::BuildScene;
 use crate::image::Frame;
 use crate::io::frame_source::FrameSource;
-use crate::raycast::cast_frame_with;
 use crate::shading::FrameShaders;
 use crate::texture::delight::Observation;
 use crate::texture::fusion::FrameStream;
@@ -109,7 +108,7 @@ impl FrameStream for CaseFrames<'_> {
         let depth: &[f32] = match self.scene.cache.get(index) {
             Some(d) => d,
             None => {
-                self.depth = cast_frame_with(&self.scene.scene, &self.scene.rays, pose).z;
+                self.depth = self.scene.cast(index).z;
                 &self.depth
             }
         };

@@ -9,7 +9,7 @@ use crate::io::case::Case;
 use crate::io::poses::FrameRef;
 use crate::math::Affine;
 use crate::model::manifest::BuildTimings;
-use crate::raycast::{RayTable, Scene};
+use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
 use crate::render::triangle_uvs;
 use crate::shading::calibrated::cos_theta_of;
 use crate::shading::FrameShaders;
@@ -86,6 +86,15 @@ impl BuildScene {
             cache: DepthCache::new(n, opts.depth_cache_bytes),
             case,
         })
+    }
+
+    /// Ray cast frame `i` from its pose; pixels outside the case's image mask see nothing.
+    pub fn cast(&self, i: usize) -> GBuffer {
+        let mut g = cast_frame_with(&self.scene, &self.rays, &self.poses[i]);
+        if let Some(mask) = &self.case.mask {
+            g.mask_out(&mask.image);
+        }
+        g
     }
 
     /// Number of frames.
