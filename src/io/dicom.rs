@@ -20,11 +20,14 @@
 //!   SliceThickness, else fails.
 //! - A header whose Rows × Columns × BitsAllocated exceed what the file could hold (1024× its
 //!   size for compressed syntaxes) is rejected before any pixel buffer is allocated.
-//! - Pixel data in a transfer syntax this build cannot decode (JPEG 2000, JPEG-LS, ...) fails
-//!   with a message giving the syntax's UID and name.
+//! - Pixel data in a transfer syntax this build cannot decode (JPEG-LS, HTJ2K, JPEG XL, ...)
+//!   fails with a message giving the syntax's UID and name. JPEG 2000 (.4.90, .4.91) and RLE go
+//!   through our own adapters (`j2k.rs`, `pixels.rs`), which check the codestream against the
+//!   header and return errors where dicom-pixeldata's would panic on damaged data.
 
 mod geometry;
 mod header;
+mod j2k;
 mod pixels;
 mod scan;
 

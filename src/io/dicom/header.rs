@@ -128,9 +128,9 @@ pub(crate) struct SliceHeader {
     pub intercept: f64,
 }
 
-/// Transfer syntaxes whose pixel data dicom-pixeldata decodes with the features this crate
-/// enables (`native`: uncompressed, deflate, RLE, JPEG baseline/extended/lossless). Extend
-/// this list when enabling `openjp2` or `charls` in Cargo.toml.
+/// Transfer syntaxes whose pixel data this build decodes: dicom-pixeldata's `native` feature
+/// (uncompressed, deflate, JPEG baseline/extended/lossless), our RLE decoder and our JPEG 2000
+/// adapter (`j2k.rs`).
 const DECODABLE_SYNTAXES: &[&str] = &[
     "1.2.840.10008.1.2",
     "1.2.840.10008.1.2.1",
@@ -141,6 +141,8 @@ const DECODABLE_SYNTAXES: &[&str] = &[
     "1.2.840.10008.1.2.4.51",
     "1.2.840.10008.1.2.4.57",
     "1.2.840.10008.1.2.4.70",
+    "1.2.840.10008.1.2.4.90",
+    "1.2.840.10008.1.2.4.91",
     "1.2.840.10008.1.2.5",
 ];
 
@@ -355,7 +357,7 @@ impl SliceHeader {
             return Err(Error::unsupported(
                 name,
                 format!(
-                    "pixel data in transfer syntax {} cannot be decoded by this build (supported: uncompressed, deflate, RLE, JPEG baseline/extended/lossless)",
+                    "pixel data in transfer syntax {} cannot be decoded by this build (supported: uncompressed, deflate, RLE, JPEG baseline/extended/lossless, JPEG 2000)",
                     describe_syntax(&transfer_syntax)
                 ),
             ));
