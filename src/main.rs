@@ -1,11 +1,12 @@
 //! The `bronchosim` command line: parse, call the library, print. Nothing else lives here.
 
 use anyhow::Context;
-use bronchosim::inspect::{inspect_case, InspectOptions};
+use bronchosim::inspect::{inspect, InspectOptions};
 use bronchosim::math::Point3;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::render::{RenderOptions, ShadingMode};
 use bronchosim::workflow::build::{build_model, BuildOptions, ShadingChoice};
+use bronchosim::workflow::convert::{convert_ct, ConvertOptions};
 use bronchosim::workflow::demo::run_demo;
 use bronchosim::workflow::flythrough::{flythrough, FlythroughOptions};
 use bronchosim::workflow::render::{render_command, RenderCommandOptions};
@@ -30,9 +31,9 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Validate a case folder (CT, camera, poses, frames) and print a summary.
+    /// Validate a case folder (CT, camera, poses, frames), or a bare CT, and print a summary.
     Inspect {
-        /// The case folder (see CASE_FORMAT.md).
+        /// A case folder (see CASE_FORMAT.md), a NIfTI file (.nii / .nii.gz) or a DICOM folder.
         case: PathBuf,
         /// Print the summary as JSON instead of text.
         #[arg(long)]
@@ -40,6 +41,18 @@ enum Command {
         /// Only read frame headers instead of decoding every frame (faster, checks less).
         #[arg(long)]
         quick: bool,
+    },
+    /// Convert a CT (a DICOM folder, a NIfTI file or a case's CT) to one NIfTI file in HU with
+    /// its affine, as 3D Slicer and ITK-SNAP open it.
+    Convert {
+        /// A DICOM folder, a NIfTI file (.nii / .nii.gz) or a case folder.
+        input: PathBuf,
+        /// The NIfTI file to write (.nii or .nii.gz).
+        #[arg(long)]
+        out: PathBuf,
+        /// Replace an existing output file.
+        #[arg(long)]
+        force: bool,
     },
     /// Segment the airway in a CT and extract the lumen mesh (segmentation.nii.gz, lumen.ply/.obj/.glb,
     /// summary.json).
@@ -425,12 +438,23 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        Command::Convert { input, out, force } => {
+            let s = convert_ct(&input, &out, &ConvertOptions { force })
+                .with_context(|| format!("convert {}", input.display()))?;
+            if !cli.quiet {
+                print!("{}", s.to_text());
+                for w in &s.warnings {
+                    eprintln!("warning: {w}");
+                }
+            }
+            Ok(())
+        }
         Command::Inspect { case, json, quick } => {
             let opts = InspectOptions {
                 decode_all_frames: !quick,
             };
-            let report = inspect_case(&case, &opts)
-                .with_context(|| format!("inspect {}", case.display()))?;
+            let report =
+                inspect(&case, &opts).with_context(|| format!("inspect {}", case.display()))?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else {

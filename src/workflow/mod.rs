@@ -4,6 +4,7 @@
 pub mod albedo_truth;
 pub mod build;
 pub mod build_frames;
+pub mod convert;
 pub mod cross_validate;
 pub mod demo;
 pub mod flythrough;
