@@ -1,7 +1,7 @@
 //! `bronchosim convert` end to end: the real JPEG 2000 series becomes a NIfTI whose values equal
 //! nibabel's reading of SimpleITK's NIfTI of the same series (one CRC-32 per slice) and whose
 //! sform and qform both give SimpleITK's affine within 1e-4 mm (values from
-//! scripts/reference/make_j2k_series.py); existing outputs are never clobbered without --force;
+//! scripts/reference/make_real_dicom_series.py); existing outputs are never clobbered without --force;
 //! bad inputs fail with one line naming the file and leave nothing behind.
 
 use std::io::Read;
@@ -52,7 +52,7 @@ fn assert_one_line_error(o: &Outcome, file: &str, needle: &str) {
 }
 
 fn reference() -> Value {
-    let text = std::fs::read_to_string(data("dicom_j2k_reference.json")).unwrap();
+    let text = std::fs::read_to_string(data("dicom_real_reference.json")).unwrap();
     let all: Value = serde_json::from_str(&text).unwrap();
     all["series"]["j2k_lossless"]["nibabel_from_simpleitk_nifti"].clone()
 }

@@ -116,7 +116,7 @@ fn dicom_folder_is_inspected_as_a_ct() {
         r["ct"]["dicom"]["transfer_syntax"],
         "1.2.840.10008.1.2.4.90 (JPEG 2000 Image Compression (Lossless Only))"
     );
-    // Same extremes as the reference decoders (tests/data/dicom_j2k_reference.json).
+    // Same extremes as the reference decoders (tests/data/dicom_real_reference.json).
     assert_eq!(r["ct"]["hu_range"], json!([-1024.0, 1450.0]));
     // A folder holding a DICOM series and a text file is a bad series, named as such.
     let tmp = tempfile::tempdir().unwrap();

@@ -10,7 +10,7 @@ Good series (read by SimpleITK's ImageSeriesReader, world points converted LPS -
   axial_rle     axial re-encoded with RLE Lossless (must equal axial voxel for voxel)
   single_slice  one 8-bit slice, slope 2 / intercept -1000, SliceThickness 2.5 mm
   jpeg2000      genuine JPEG 2000 Lossless slices (encoded by GDCM via SimpleITK); its reference
-                values are written by make_j2k_series.py
+                values are written by make_real_dicom_series.py
 Bad series (each must fail with a message naming the folder/file and the problem):
   unknown_syntax  a transfer syntax UID no registry knows
   mixed_series  two SeriesInstanceUIDs

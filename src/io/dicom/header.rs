@@ -143,6 +143,9 @@ const DECODABLE_SYNTAXES: &[&str] = &[
     "1.2.840.10008.1.2.4.70",
     "1.2.840.10008.1.2.4.90",
     "1.2.840.10008.1.2.4.91",
+    "1.2.840.10008.1.2.4.201",
+    "1.2.840.10008.1.2.4.202",
+    "1.2.840.10008.1.2.4.203",
     "1.2.840.10008.1.2.5",
 ];
 
@@ -223,8 +226,8 @@ pub(crate) fn describe_syntax(uid: &str) -> String {
 }
 
 /// Largest decoded/encoded size ratio accepted for compressed pixel data before decoding:
-/// RLE reaches 64:1 on constant rows and JPEG a few hundred to one on flat images; anything
-/// beyond this is a header lying about the image size.
+/// RLE reaches 64:1 on constant rows, JPEG a few hundred to one on flat images and deflate at
+/// most 1032:1; anything beyond this is a header lying about the image size.
 const MAX_COMPRESSION_RATIO: u64 = 1024;
 
 fn text(obj: &DefaultDicomObject, tag: dicom_object::Tag) -> String {
@@ -340,7 +343,9 @@ impl SliceHeader {
                 | "1.2.840.10008.1.2.2"
                 | "1.2.840.10008.1.2.1.99"
         );
-        let limit = if encapsulated {
+        // A deflated data set holds native pixels, but compressed with the rest of the file.
+        let deflated = transfer_syntax == "1.2.840.10008.1.2.1.99";
+        let limit = if encapsulated || deflated {
             file_len.saturating_mul(MAX_COMPRESSION_RATIO)
         } else {
             file_len
@@ -357,12 +362,22 @@ impl SliceHeader {
             return Err(Error::unsupported(
                 name,
                 format!(
-                    "pixel data in transfer syntax {} cannot be decoded by this build (supported: uncompressed, deflate, RLE, JPEG baseline/extended/lossless, JPEG 2000)",
+                    "pixel data in transfer syntax {} cannot be decoded by this build (supported: uncompressed, deflate, RLE, JPEG baseline/extended 8-bit/lossless, JPEG 2000, HTJ2K)",
                     describe_syntax(&transfer_syntax)
                 ),
             ));
         }
 
+        if transfer_syntax == "1.2.840.10008.1.2.4.51" && bits_stored > 8 {
+            // Process 4: jpeg-decoder 0.3 decodes 8-bit DCT (process 2) only.
+            return Err(Error::unsupported(
+                name,
+                format!(
+                    "pixel data in transfer syntax {} with {bits_stored} bits stored (12-bit DCT) cannot be decoded by this build; 8-bit JPEG Extended can",
+                    describe_syntax(&transfer_syntax)
+                ),
+            ));
+        }
         let position = floats(tags::IMAGE_POSITION_PATIENT, "ImagePositionPatient", 3)?;
         let orientation = floats(
             tags::IMAGE_ORIENTATION_PATIENT,

@@ -1,5 +1,6 @@
-//! JPEG 2000 pixel data (DICOM PS3.5 A.4.4: transfer syntaxes 1.2.840.10008.1.2.4.90 and .91)
-//! decoded to stored pixel values.
+//! JPEG 2000 pixel data (DICOM PS3.5 A.4.4 and A.4.11: transfer syntaxes
+//! 1.2.840.10008.1.2.4.90 and .91, and High-Throughput JPEG 2000 .4.201 to .4.203, which share
+//! the codestream syntax) decoded to stored pixel values.
 //!
 //! Steps: join the frame's fragments into one codestream; read its SIZ marker segment ourselves
 //! and check it against the DICOM header (one component, Columns x Rows, no subsampling,

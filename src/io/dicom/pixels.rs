@@ -8,8 +8,15 @@ use super::j2k;
 use crate::{Error, Result};
 
 const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
-/// JPEG 2000 Image Compression (Lossless Only) and JPEG 2000 Image Compression.
-pub(crate) const JPEG_2000: [&str; 2] = ["1.2.840.10008.1.2.4.90", "1.2.840.10008.1.2.4.91"];
+/// JPEG 2000 Image Compression (Lossless Only), JPEG 2000 Image Compression, and High-Throughput
+/// JPEG 2000 (Lossless Only, with RPCL Options, lossy): one codestream syntax, one decoder.
+pub(crate) const JPEG_2000: [&str; 5] = [
+    "1.2.840.10008.1.2.4.90",
+    "1.2.840.10008.1.2.4.91",
+    "1.2.840.10008.1.2.4.201",
+    "1.2.840.10008.1.2.4.202",
+    "1.2.840.10008.1.2.4.203",
+];
 
 /// Decode the pixels of `src` (whose header is `h`) into `out` (one slice, i fastest), applying
 /// BitsStored/HighBit masking, sign extension and RescaleSlope/Intercept.

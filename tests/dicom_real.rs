@@ -1,7 +1,8 @@
-//! JPEG 2000 DICOM (transfer syntaxes .4.90 lossless and .4.91 lossy) on real Siemens CT slices,
-//! against independent decoders (values from scripts/reference/make_j2k_series.py): every HU
-//! value equal to pydicom + pylibjpeg-openjpeg's (one CRC-32 per slice), the affine and chosen
-//! voxels' world points within 1e-4 mm of SimpleITK's; damaged codestreams fail naming the file.
+//! DICOM series made from real Siemens CT slices: JPEG 2000 (.4.90 lossless, .4.91 lossy), HTJ2K
+//! (.4.201, .4.203) and deflate (.1.99), against independent decoders (values from
+//! scripts/reference/make_real_dicom_series.py): every HU value equal to pydicom's (one CRC-32
+//! per slice), the affine and chosen voxels' world points within 1e-4 mm of SimpleITK's;
+//! damaged codestreams fail naming the file.
 
 use std::path::{Path, PathBuf};
 
@@ -17,7 +18,7 @@ fn series_dir(name: &str) -> PathBuf {
 }
 
 fn reference(name: &str) -> Value {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/dicom_j2k_reference.json");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/dicom_real_reference.json");
     let all: Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
     all["series"][name].clone()
 }
@@ -138,6 +139,29 @@ fn gdcm_encoded_series_equals_reference_decoders() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/dicom/jpeg2000");
     let (vol, _) = read_dicom_series_with_info(&dir).unwrap();
     check("gdcm_small", &vol);
+}
+
+#[test]
+fn htj2k_series_equal_reference_decoders() {
+    // Encoded by OpenJPH, decoded for reference by OpenJPEG (pydicom) and GDCM (SimpleITK).
+    for (name, uid) in [
+        ("htj2k_lossless", "1.2.840.10008.1.2.4.201"),
+        ("htj2k_lossy", "1.2.840.10008.1.2.4.203"),
+    ] {
+        let (vol, info) = read_dicom_series_with_info(&series_dir(name)).unwrap();
+        assert_eq!(info.transfer_syntax_uid, uid);
+        check(name, &vol);
+    }
+}
+
+#[test]
+fn deflated_series_equals_reference_decoders() {
+    let (vol, info) = read_dicom_series_with_info(&series_dir("deflated")).unwrap();
+    assert_eq!(info.transfer_syntax_uid, "1.2.840.10008.1.2.1.99");
+    check("deflated", &vol);
+    // Same crops as the lossless HTJ2K series: same voxels.
+    let (ht, _) = read_dicom_series_with_info(&series_dir("htj2k_lossless")).unwrap();
+    assert_eq!(vol, ht);
 }
 
 #[test]
