@@ -65,6 +65,11 @@ CROP = (200, 240, 150, 182)  # columns 200..239, rows 150..181 of each slice
 SERIES = ("j2k_lossless", "j2k_lossy", "j2k_sign_mismatch", "htj2k_lossless", "htj2k_lossy", "deflated")
 
 
+def uid_for(*names):
+    """A UID derived from the names, so that re-running the script rewrites identical files."""
+    return generate_uid(entropy_srcs=["bronchosim test data"] + [os.path.basename(n) for n in names])
+
+
 def normal_position(ds):
     iop = np.array(ds.ImageOrientationPatient, dtype=float)
     n = np.cross(iop[:3], iop[3:])
@@ -84,7 +89,7 @@ def crc_i32(a):
 
 
 def write_lossy(files, folder):
-    series_uid = generate_uid()
+    series_uid = uid_for(folder)
     for f in files:
         ds = pydicom.dcmread(f)
         hu = hu_of(ds).astype(np.int16)
@@ -100,7 +105,7 @@ def write_lossy(files, folder):
         ds.LossyImageCompressionMethod = "ISO_15444_1"
         ds.SeriesInstanceUID = series_uid
         ds.SeriesDescription = "bronchosim: JPEG 2000 lossy re-encoding"
-        ds.SOPInstanceUID = generate_uid()
+        ds.SOPInstanceUID = uid_for(folder, f)
         ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
         ds.save_as(os.path.join(folder, os.path.basename(f)), enforce_file_format=True)
 
@@ -114,7 +119,7 @@ def sign_mismatch_codestream(hu):
 def write_crops(files, folder, ts, encode, description):
     """3 slices of the CROP of `files` as signed 12-bit HU; encode(hu) gives the one fragment of
     an encapsulated syntax, or None for native pixel data."""
-    series_uid = generate_uid()
+    series_uid = uid_for(folder)
     c0, c1, r0, r1 = CROP
     for f in files[:3]:
         ds = pydicom.dcmread(f)
@@ -137,7 +142,7 @@ def write_crops(files, folder, ts, encode, description):
         ds.file_meta.TransferSyntaxUID = ts
         ds.SeriesInstanceUID = series_uid
         ds.SeriesDescription = "bronchosim: " + description
-        ds.SOPInstanceUID = generate_uid()
+        ds.SOPInstanceUID = uid_for(folder, f)
         ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID
         ds.save_as(os.path.join(folder, os.path.basename(f)), enforce_file_format=True)
 
