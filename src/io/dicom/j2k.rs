@@ -4,9 +4,9 @@
 //!
 //! Steps: join the frame's fragments into one codestream; read its SIZ marker segment ourselves
 //! and check it against the DICOM header (one component, Columns x Rows, no subsampling,
-//! precision within BitsAllocated) before the decoder allocates anything; decode with OpenJPEG's
-//! pure-Rust port (`jpeg2k` over `openjp2`) in its default strict mode, so a truncated codestream
-//! is an error rather than a partly blank image; check the decoded component again; apply
+//! precision within BitsAllocated) before the decoder allocates anything; decode with OpenJPEG
+//! (`jpeg2k` over `openjpeg-sys`) in its default strict mode, so a truncated codestream is an
+//! error rather than a partly blank image; check the decoded component again; apply
 //! pydicom's sign correction when the codestream's signedness disagrees with
 //! PixelRepresentation (a known export defect): the low `precision` bits are reinterpreted
 //! with the header's sign.
@@ -116,8 +116,8 @@ pub(crate) fn decode_frame(
         ));
     }
     debug_assert_eq!(out.len(), want.cols as usize * want.rows as usize);
-    // The port of OpenJPEG is bounds-checked Rust: a defect it hits on a damaged codestream is a
-    // panic, which must become this file's error and not take the whole series down.
+    // A panic in the wrapper on a damaged codestream must become this file's error, not take
+    // the whole series (and the process) down.
     let decoded = std::panic::catch_unwind(|| jpeg2k::Image::from_bytes(cs))
         .map_err(|_| "JPEG 2000 decoder failed on a damaged codestream".to_string())?
         .map_err(|e| match e {
