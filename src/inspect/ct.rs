@@ -298,7 +298,7 @@ mod tests {
         let mut v = Volume::from_data([6, 5, 4], aff, vec![-1000.0f32; 120]).unwrap();
         v.data[1 + 6 * 2 + 30] = f32::NAN; // (1, 2, 1)
         v.data[4 + 6 * 3 + 30 * 2] = f32::INFINITY; // (4, 3, 2)
-        v.data[2 + 6 * 1 + 30 * 2] = f32::NEG_INFINITY; // (2, 1, 2)
+        v.data[2 + 6 + 30 * 2] = f32::NEG_INFINITY; // (2, 1, 2)
         v.data[0] = 500.0;
         let (nf, range) = scan(&v);
         assert_eq!((nf.count, nf.nan, nf.pos_inf, nf.neg_inf), (3, 1, 1, 1));
