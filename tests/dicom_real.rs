@@ -4,6 +4,12 @@
 //! per slice), the affine and chosen voxels' world points within 1e-4 mm of SimpleITK's;
 //! damaged codestreams fail naming the file.
 
+mod common {
+    // Only next_u64 is needed here; the uniform and normal draws serve the shading tests.
+    #[allow(dead_code)]
+    pub mod rng;
+}
+
 use std::path::{Path, PathBuf};
 
 use bronchosim::io::dicom::{read_dicom_series_from_memory, read_dicom_series_with_info};
@@ -281,13 +287,8 @@ fn corrupted_codestream_bytes_never_panic() {
     // Seeded byte corruption inside the codestream: Ok (JPEG 2000 has few checks) or an error
     // naming the file, never a panic or a wrong-sized volume.
     let files = slices("j2k_sign_mismatch");
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut rng = common::rng::Rng::new(17);
+    let mut next = move || rng.next_u64();
     let (mut ok, mut err) = (0, 0);
     for _ in 0..300 {
         let (name, bytes) = &files[(next() % files.len() as u64) as usize];
