@@ -190,6 +190,24 @@ fn corrupt_deflate_stream_fails_fast() {
 }
 
 #[test]
+fn stray_delimiter_with_a_length_fails_fast() {
+    // Found by cargo-fuzz from tests/data/dicom/jpeg2000/j0.dcm: PixelData's tag damaged, so a
+    // sequence delimiter declaring 3.2 GB stands at the top level; dicom-parser zero-filled it
+    // (4.1 s, 3.2 GB) while the pre-scan skipped delimiters without looking at their length.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/dicom_fuzz/stray_delimiter_length.dcm");
+    let t = std::time::Instant::now();
+    let err = read_one("stray.dcm", std::fs::read(path).unwrap()).unwrap_err();
+    assert!(t.elapsed().as_secs_f64() < 1.0, "{:?}", t.elapsed());
+    assert!(
+        err.contains("stray.dcm")
+            && err.contains("(FFFE,E0DD)")
+            && err.contains("3271557120 bytes instead of 0"),
+        "{err}"
+    );
+}
+
+#[test]
 fn unsigned_codestream_with_signed_header_is_sign_extended() {
     let (vol, _) = read_dicom_series_with_info(&series_dir("j2k_sign_mismatch")).unwrap();
     check("j2k_sign_mismatch", &vol);

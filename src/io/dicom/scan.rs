@@ -335,6 +335,18 @@ impl<R: Skip> Walker<'_, R> {
         while self.pos < end.min(self.len) {
             let h = self.header(enc)?;
             if h.tag == ITEM_END || h.tag == SEQ_END {
+                // dicom-parser reads a stray delimiter's declared length as a value (zero-filling
+                // it first), while this walk would not skip it: both must see length 0.
+                if h.len != 0 {
+                    let (g, e) = h.tag;
+                    return Err(Stop::Bad(Error::invalid(
+                        self.name,
+                        format!(
+                            "corrupt DICOM element ({g:04X},{e:04X}) at byte {}: a delimitation item declares {} bytes instead of 0",
+                            self.pos, h.len
+                        ),
+                    )));
+                }
                 if delimited {
                     return Ok(());
                 }
