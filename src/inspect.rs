@@ -7,6 +7,7 @@ pub use ct::{summarize_ct, CtSummary, NonFiniteVoxels};
 
 use crate::io::case::Case;
 use crate::io::ct::{read_ct, CtSource};
+use crate::io::image_mask::{detect_black_border, BlackBorder};
 use crate::math::Point3;
 use crate::{Error, Result};
 use serde::Serialize;
@@ -70,6 +71,12 @@ pub struct VideoSummary {
     pub centres_in_air: usize,
     /// Camera centres outside the CT grid.
     pub centres_outside_ct: usize,
+    /// Share of each frame's pixels that mask.png marks as image, when the case has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mask_image_share: Option<f64>,
+    /// Without mask.png: a border that is black in every frame looked at.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub black_border: Option<BlackBorder>,
 }
 
 /// Everything `inspect` found.
@@ -90,6 +97,9 @@ pub struct InspectReport {
     /// Warnings a person should read.
     pub warnings: Vec<String>,
 }
+
+/// Frames looked at for a constant black border (spread over the video).
+const BORDER_FRAMES: usize = 8;
 
 /// Entries whose presence makes a folder a case (CASE_FORMAT.md) rather than a DICOM series.
 const CASE_ENTRIES: &[&str] = &[
@@ -169,6 +179,23 @@ pub fn inspect_case(dir: &Path, opts: &InspectOptions) -> Result<InspectReport> 
             centres.len()
         ));
     }
+    let black_border = match &case.mask {
+        Some(_) => None,
+        None => {
+            let n = case.frame_count();
+            let wanted: Vec<usize> = (0..BORDER_FRAMES).map(|k| k * n / BORDER_FRAMES).collect();
+            let frames = case.frames_at(&wanted)?;
+            detect_black_border(frames.values())
+        }
+    };
+    if let Some(b) = &black_border {
+        warnings.push(format!(
+            "{:.0}% of every frame is a black border (outside the scope's field of view?) and the \
+             case has no mask.png: add one (white = image) so that the border and any burnt-in \
+             text enter no fit and no texture",
+            100.0 * b.share
+        ));
+    }
     let cam = &case.camera;
     let fov = cam.field_of_view();
     Ok(InspectReport {
@@ -193,6 +220,8 @@ pub fn inspect_case(dir: &Path, opts: &InspectOptions) -> Result<InspectReport> 
             path_length_mm,
             centres_in_air: in_air,
             centres_outside_ct: outside,
+            mask_image_share: case.mask.as_ref().map(|m| m.image_share()),
+            black_border,
         }),
         warnings,
     })
@@ -255,6 +284,24 @@ fn camera_video_text(s: &mut String, m: &CameraSummary, v: &VideoSummary) {
             " (headers only)"
         }
     );
+    match (v.mask_image_share, &v.black_border) {
+        (Some(share), _) => {
+            let _ = writeln!(
+                s,
+                "        mask.png: {:.1}% of each frame is image",
+                100.0 * share
+            );
+        }
+        (None, Some(b)) => {
+            let _ = writeln!(
+                s,
+                "        no mask.png; {:.1}% of each frame is black in all {} frames looked at",
+                100.0 * b.share,
+                b.frames
+            );
+        }
+        (None, None) => {}
+    }
     let _ = writeln!(
         s,
         "poses   {}, camera path {:.1} mm",
