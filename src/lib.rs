@@ -14,6 +14,7 @@ pub mod mesh;
 pub mod model;
 pub mod phantom;
 pub mod raycast;
+pub mod registration;
 pub mod render;
 pub mod rng;
 pub mod shading;

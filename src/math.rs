@@ -3,7 +3,7 @@
 //! World coordinates are the CT's patient space in mm, RAS+. Camera coordinates follow
 //! OpenCV: +x right, +y down, +z forward.
 
-pub use nalgebra::{Matrix3, Matrix4, Point2, Point3, Vector2, Vector3, Vector4};
+pub use nalgebra::{Matrix3, Matrix4, Point2, Point3, Rotation3, Vector2, Vector3, Vector4};
 
 /// A 4x4 homogeneous affine transform (e.g. voxel index → world mm, camera → world).
 pub type Affine = Matrix4<f64>;

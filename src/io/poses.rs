@@ -173,6 +173,17 @@ fn strip_path_prefix(message: &str, path: &Path) -> String {
 /// shortest round-trip form. Image paths are written relative to `base_dir` with `/`.
 /// Each pose is validated first so a file this writes is always readable by [`read_poses`].
 pub fn write_poses(path: &Path, poses: &[PoseEntry], base_dir: &Path) -> Result<()> {
+    write_poses_annotated(path, poses, base_dir, &[])
+}
+
+/// [`write_poses`] with more keys per entry: `notes[i]` (when given) is appended to entry `i`
+/// (e.g. a registration's correction and status); readers of poses.json ignore unknown keys.
+pub fn write_poses_annotated(
+    path: &Path,
+    poses: &[PoseEntry],
+    base_dir: &Path,
+    notes: &[serde_json::Map<String, Value>],
+) -> Result<()> {
     if poses.is_empty() {
         return Err(Error::invalid(path, "no poses to write"));
     }
@@ -193,8 +204,14 @@ pub fn write_poses(path: &Path, poses: &[PoseEntry], base_dir: &Path) -> Result<
             .map(|k| serde_json::Value::from(m[(k / 4, k % 4)]).to_string())
             .collect();
         let sep = if i + 1 < poses.len() { "," } else { "" };
+        let extra: String = notes
+            .get(i)
+            .into_iter()
+            .flatten()
+            .map(|(k, v)| format!(", {}: {v}", Value::String(k.clone())))
+            .collect();
         text.push_str(&format!(
-            "  {{ {frame}, \"camera_to_world\": [{}] }}{sep}\n",
+            "  {{ {frame}, \"camera_to_world\": [{}]{extra} }}{sep}\n",
             numbers.join(", ")
         ));
     }

@@ -1,6 +1,7 @@
 //! The model folder's manifest (model.json) and shading file (shading.json): the plain data
 //! `build` writes and `render`, `flythrough` and `evaluate` read back.
 
+use crate::model::registration::PoseRegistration;
 use serde::{Deserialize, Serialize};
 
 use crate::camera::Camera;
@@ -40,6 +41,9 @@ pub struct BuildTimings {
     pub mesh: f64,
     /// Atlas and texel rasterisation.
     pub atlas: f64,
+    /// Registration of the poses to the CT (every round: light, texture, poses).
+    #[serde(default)]
+    pub registration: f64,
     /// Per-frame ray cast, samples and Psi fit (all frames).
     pub fit: f64,
     /// The calibrated light fit on the pooled samples.
@@ -91,6 +95,9 @@ pub struct ModelManifest {
     /// How the calibrated light was fitted (absent when it was not, and in older models).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub light_fit: Option<LightFitSettings>,
+    /// How the poses were registered to the CT (`None`: trusted as given, `--poses fixed`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub registration: Option<PoseRegistration>,
     /// What the build could not do as asked (e.g. a failed calibrated fit).
     pub warnings: Vec<String>,
     /// Mean L2 stretch of the atlas.

@@ -4,6 +4,7 @@
 pub mod cross_validation;
 pub mod load;
 pub mod manifest;
+pub mod registration;
 
 pub use load::Model;
 pub use manifest::{ModelManifest, MODEL_FORMAT_VERSION};

@@ -15,6 +15,7 @@ use super::from_mask::{ct_from_mask_file, FromMaskOptions};
 use super::mask_path::mask_centreline;
 use super::overlay::ScopeOverlay;
 use super::path::{camera_path, novel_views, tree_centreline, PathOptions, SmoothPath};
+use super::pose_noise::{tracker_poses, PoseNoise};
 use super::render::{auto_gain, expose, render_radiance, LightModel, SensorModel, SubpixelRays};
 use super::truth_io::{write_albedo_ply, write_gray16_png, write_gray8_png, write_linear16_png};
 use super::truth_mesh::{mask_truth_mesh, tree_truth_mesh};
@@ -74,6 +75,9 @@ pub struct PhantomOptions {
     /// Burn a scope's overlay into the frames (black border around an octagonal field of
     /// view, on-screen text over the image) and write the matching CASE/mask.png.
     pub scope_overlay: bool,
+    /// Tracker-like error of the poses written to poses.json (the true ones go to
+    /// truth/poses.json either way); zero by default.
+    pub pose_noise: PoseNoise,
     pub force: bool,
 }
 
@@ -98,6 +102,7 @@ impl Default for PhantomOptions {
             sensor: SensorModel::default(),
             path: PathOptions::default(),
             scope_overlay: false,
+            pose_noise: PoseNoise::new(0.0, 0.0),
             force: false,
         }
     }
@@ -265,6 +270,13 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     let frames_dir = dir.join("frames");
     std::fs::create_dir_all(&frames_dir).map_err(|e| Error::io(&frames_dir, e))?;
     let mut entries = Vec::with_capacity(poses.len());
+    let mut true_entries = Vec::with_capacity(poses.len());
+    // What a tracker would report (the frames are rendered from the true poses).
+    let reported = tracker_poses(
+        &poses,
+        &opts.pose_noise,
+        seed.wrapping_mul(613).wrapping_add(29),
+    );
     let mut gains = Vec::with_capacity(poses.len());
     let noise_seed = seed.wrapping_mul(7919).wrapping_add(1);
     let overlay = opts
@@ -291,9 +303,13 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
             mean_linear: mean,
             saturated_fraction: sat,
         });
+        true_entries.push(PoseEntry {
+            frame: FrameRef::Image(path.clone()),
+            pose: Pose::new(*pose),
+        });
         entries.push(PoseEntry {
             frame: FrameRef::Image(path),
-            pose: Pose::new(*pose),
+            pose: Pose::new(reported[i]),
         });
     }
     write_poses(&dir.join("poses.json"), &entries, dir)?;
@@ -307,6 +323,7 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     let vdir = truth.join("views");
     std::fs::create_dir_all(&vdir).map_err(|e| Error::io(&vdir, e))?;
     write_ply(&truth.join("lumen.ply"), &mesh)?;
+    write_poses(&truth.join("poses.json"), &true_entries, dir)?;
     let vertex_albedo: Vec<[f32; 3]> = mesh
         .positions
         .par_iter()
@@ -363,10 +380,12 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
         "size": [opts.width, opts.height],
         "supersample": opts.supersample,
         "truth_grid_mm": opts.truth_grid_mm,
+        "pose_noise": &opts.pose_noise,
         "files": {
             "lumen.ply": "true lumen mesh, world mm (RAS+), normals into the lumen",
             "albedo_vertices.ply": "the same mesh with float red, green, blue: linear albedo per vertex",
             "gains.json": "per-frame auto-gain, light and sensor model",
+            "poses.json": "the true pose of every frame, images relative to the case folder (the case's poses.json has pose_noise added)",
             "views.json": "novel view poses (camera_to_world), images relative to truth/",
             "camera.json": "pinhole camera of the views (no distortion)",
             "views/NNNNNN.png": "sRGB 8-bit, clean (no noise), reference gain",

@@ -12,6 +12,7 @@ pub mod from_mask;
 pub mod mask_path;
 pub mod overlay;
 pub mod path;
+pub mod pose_noise;
 pub mod render;
 pub mod truth_io;
 pub mod truth_mesh;

@@ -7,6 +7,7 @@ pub mod demo;
 pub mod flythrough;
 pub mod new_views_figure;
 pub mod progress;
+pub mod register;
 pub mod render;
 pub mod report;
 pub mod segment;

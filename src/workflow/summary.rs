@@ -1,6 +1,8 @@
 //! What each command prints when it is done: one formatter per command's result, so the
 //! command line only parses, calls and prints.
 
+use crate::model::registration::PoseRegistration;
+use crate::workflow::register::RegisterSummary;
 use std::path::Path;
 
 use crate::model::ModelManifest;
@@ -63,6 +65,9 @@ pub fn build_text(out: &Path, m: &ModelManifest) -> String {
         m.mean_r2,
         m.shading_model
     );
+    if let Some(reg) = &m.registration {
+        text.push_str(&registration_line(reg));
+    }
     if let Some(cv) = &m.cross_validation {
         for mc in &cv.models {
             text.push_str(&format!(
@@ -76,6 +81,35 @@ pub fn build_text(out: &Path, m: &ModelManifest) -> String {
         }
     }
     text
+}
+
+/// One line on a registration: rounds, median and largest correction, frames left out.
+fn registration_line(reg: &PoseRegistration) -> String {
+    let mut mm: Vec<f64> = reg.frames.iter().map(|f| f.correction_mm).collect();
+    let mut deg: Vec<f64> = reg.frames.iter().map(|f| f.correction_deg).collect();
+    mm.sort_by(f64::total_cmp);
+    deg.sort_by(f64::total_cmp);
+    let mid = mm.len() / 2;
+    format!(
+        "  poses registered in {} rounds: median correction {:.2} mm / {:.2} deg (largest {:.2} mm / {:.2} deg), {} of {} frames left out\n",
+        reg.rounds.len(),
+        mm.get(mid).copied().unwrap_or(0.0),
+        deg.get(mid).copied().unwrap_or(0.0),
+        mm.last().copied().unwrap_or(0.0),
+        deg.last().copied().unwrap_or(0.0),
+        reg.left_out,
+        reg.frames.len()
+    )
+}
+
+/// What `register` wrote into `out`.
+pub fn register_text(out: &Path, s: &RegisterSummary) -> String {
+    format!(
+        "registered {} in {:.1} s\n{}",
+        out.display(),
+        s.seconds,
+        registration_line(&s.registration)
+    )
 }
 
 impl PhantomSummary {

@@ -6,7 +6,7 @@ use bronchosim::render::RenderOptions;
 use bronchosim::shading::paper::{PsiLookup, PsiLookupKind};
 use bronchosim::shading::ShadingKind;
 use bronchosim::texture::fusion::FusionKind;
-use bronchosim::workflow::build::BuildOptions;
+use bronchosim::workflow::build::{BuildOptions, PosesMode};
 use bronchosim::workflow::flythrough::FlythroughOptions;
 use bronchosim::workflow::segment::{parse_point, SegmentCommandOptions};
 use clap::{Args, Parser, Subcommand};
@@ -45,6 +45,10 @@ pub enum Command {
     /// and fuse the texture; writes the model folder (model.json, airway.glb, albedo.png,
     /// shading.json, segmentation.nii.gz, report.html).
     Build(BuildArgs),
+    /// Register every frame's pose to the CT (photometric, against the fitted light and
+    /// texture): DIR/poses.json (refined, with each frame's correction and status),
+    /// DIR/registration.json, DIR/report.html.
+    Register(RegisterArgs),
     /// The embedded default: write the phantom case (CT, video, poses, camera, truth) and build
     /// its model; open DIR/model/report.html afterwards.
     Demo(DemoArgs),
@@ -175,7 +179,31 @@ pub struct BuildArgs {
     /// report then scores new views against them next to two baselines.
     #[arg(long)]
     pub truth: Option<PathBuf>,
+    /// `refine`: register every frame's pose to the CT before fitting (photometric, against
+    /// the light and texture; frames that will not register are left out and counted).
+    /// `fixed`: trust the given poses.
+    #[arg(long, value_enum, default_value_t = build_defaults().poses)]
+    pub poses: PosesMode,
+    /// Most rounds of the registration (light + texture, then every frame's pose).
+    #[arg(long, default_value_t = build_defaults().registration_rounds)]
+    pub registration_rounds: usize,
     /// Replace an existing model folder.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// The arguments of `bronchosim register`.
+#[derive(Args, Debug)]
+pub struct RegisterArgs {
+    /// The case folder.
+    pub case: PathBuf,
+    /// Output folder (poses.json, registration.json, report.html).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Most rounds (light + texture, then every frame's pose).
+    #[arg(long, default_value_t = build_defaults().registration_rounds)]
+    pub rounds: usize,
+    /// Replace DIR if it exists.
     #[arg(long)]
     pub force: bool,
 }
@@ -222,6 +250,13 @@ pub struct PhantomArgs {
     /// view, on-screen text over the image) and write the matching mask.png.
     #[arg(long)]
     pub scope_overlay: bool,
+    /// Tracker-like error of the poses written to poses.json: RMS camera-centre distance (mm)
+    /// of a smooth drift plus per-frame jitter; the true poses go to truth/poses.json.
+    #[arg(long, default_value_t = 0.0)]
+    pub pose_noise_mm: f64,
+    /// RMS rotation error (degrees) of the poses written to poses.json.
+    #[arg(long, default_value_t = 0.0)]
+    pub pose_noise_deg: f64,
     /// Replace CASE if it exists.
     #[arg(long)]
     pub force: bool,

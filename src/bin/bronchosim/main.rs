@@ -6,10 +6,11 @@ mod args;
 use anyhow::Context;
 use args::{
     BuildArgs, Cli, Command, ConvertArgs, DemoArgs, EvaluateArgs, FlythroughArgs, InspectArgs,
-    PhantomArgs, RenderArgs, SegmentArgs,
+    PhantomArgs, RegisterArgs, RenderArgs, SegmentArgs,
 };
 use bronchosim::inspect::{inspect, InspectOptions};
 use bronchosim::math::Point3;
+use bronchosim::phantom::pose_noise::PoseNoise;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::render::evaluate::scores_text;
 use bronchosim::render::{evaluate_folders, RenderOptions};
@@ -19,9 +20,10 @@ use bronchosim::workflow::build::{build_model, BuildOptions};
 use bronchosim::workflow::convert::{convert_ct, ConvertOptions};
 use bronchosim::workflow::demo::run_demo;
 use bronchosim::workflow::flythrough::{flythrough, FlythroughOptions};
+use bronchosim::workflow::register::register_command;
 use bronchosim::workflow::render::{render_command, RenderCommandOptions};
 use bronchosim::workflow::segment::{default_segment_out, segment_command, SegmentCommandOptions};
-use bronchosim::workflow::summary::build_text;
+use bronchosim::workflow::summary::{build_text, register_text};
 use bronchosim::workflow::truth_eval::evaluate_with_baselines;
 use clap::Parser;
 use std::process::ExitCode;
@@ -31,6 +33,7 @@ fn run(command: Command, quiet: bool) -> anyhow::Result<String> {
     match command {
         Command::Demo(a) => demo(a, quiet),
         Command::Build(a) => build(a, quiet),
+        Command::Register(a) => register(a, quiet),
         Command::Segment(a) => segment(a),
         Command::Inspect(a) => inspect_ct_or_case(a, quiet),
         Command::Convert(a) => convert(a, quiet),
@@ -70,6 +73,8 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
         quiet,
         refine_light: a.light_refits,
         chroma_refits: a.chroma_refits,
+        poses: a.poses,
+        registration_rounds: a.registration_rounds,
         ..Default::default()
     };
     opts.atlas.texel_mm = a.texel_mm;
@@ -83,6 +88,21 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
         eprintln!("warning: {w}");
     }
     Ok(build_text(&a.out, &m))
+}
+
+fn register(a: RegisterArgs, quiet: bool) -> anyhow::Result<String> {
+    let opts = BuildOptions {
+        force: a.force,
+        quiet,
+        registration_rounds: a.rounds,
+        ..Default::default()
+    };
+    let s = register_command(&a.case, &a.out, &opts)
+        .with_context(|| format!("register {}", a.case.display()))?;
+    for w in &s.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(register_text(&a.out, &s))
 }
 
 fn segment(a: SegmentArgs) -> anyhow::Result<String> {
@@ -134,12 +154,20 @@ fn convert(a: ConvertArgs, quiet: bool) -> anyhow::Result<String> {
 }
 
 fn phantom(a: PhantomArgs) -> anyhow::Result<String> {
+    if !(a.pose_noise_mm >= 0.0 && a.pose_noise_deg >= 0.0) {
+        anyhow::bail!(
+            "--pose-noise-mm {} / --pose-noise-deg {}: expected non-negative numbers",
+            a.pose_noise_mm,
+            a.pose_noise_deg
+        );
+    }
     let mut opts = PhantomOptions {
         frames: a.frames,
         seed: a.seed,
         anatomy: a.anatomy,
         supersample: a.supersample,
         scope_overlay: a.scope_overlay,
+        pose_noise: PoseNoise::new(a.pose_noise_mm, a.pose_noise_deg),
         force: a.force,
         ..Default::default()
     };

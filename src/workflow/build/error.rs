@@ -47,4 +47,7 @@ pub enum BuildError {
     /// The calibrated light was asked for and could not be fitted.
     #[error("calibrated light fit: {0}")]
     CalibratedLight(#[source] Box<crate::Error>),
+    /// The poses could not be registered to the CT.
+    #[error("registration: {0}")]
+    Registration(String),
 }

@@ -3,6 +3,8 @@
 //!
 //! ```text
 //! read, segment, mesh, atlas ─► BuildScene        (scene.rs)
+//! register the poses to CT   ─► PoseRegistration  (registration.rs: rounds of light, texture,
+//!                                                  every frame's pose; flagged frames left out)
 //! first pass over the frames ─► FitPass + pooled samples   (fit_pass.rs: ray cast, Psi per frame)
 //! calibrated light           ─► CalibratedLight   (light.rs, gain_correction.rs, light_refit.rs)
 //! cross-validation           ─► the shading model in use   (cross_validation.rs)
@@ -21,6 +23,7 @@ mod gain_correction;
 mod light;
 mod light_refit;
 mod options;
+mod registration;
 mod scene;
 mod textures;
 mod write;
@@ -31,7 +34,8 @@ pub use fit_pass::{FitPass, LightSamples};
 pub use gain_correction::refine_gains_against_texture;
 pub use light::CalibratedLight;
 pub use light_refit::{refit_light_with_albedo, sample_albedo, sample_uvs};
-pub use options::BuildOptions;
+pub use options::{BuildOptions, PosesMode};
+pub use registration::{pose_notes, register_poses};
 pub use scene::BuildScene;
 pub use textures::{FusedAlbedo, Textures};
 
@@ -57,6 +61,9 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
             scene.case.ct_source.path().display()
         ));
     }
+    let registration = timed(&mut timings.registration, || {
+        registration::register_poses(&mut scene, opts, &mut warnings)
+    })?;
     let (pass, samples) = timed(&mut timings.fit, || fit_pass::fit_pass(&mut scene, opts))?;
     let light = timed(&mut timings.calibrated_fit, || {
         light::calibrated_light(&scene, samples, opts, &mut warnings)
@@ -76,6 +83,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         pass: &pass,
         shading: &shading,
         light_fit,
+        registration,
         cross_validation,
         textures: &textures,
         timings,

@@ -50,6 +50,13 @@ pub struct BuildOptions {
     pub cross_validate_max_frames: usize,
     /// Memory for depth buffers kept between passes (bytes); beyond it frames are ray cast again.
     pub depth_cache_bytes: usize,
+    /// Trust the given poses, or refine them against the CT first.
+    pub poses: PosesMode,
+    /// Most rounds of the registration (light + texture, then every frame's pose).
+    pub registration_rounds: usize,
+    /// The registration stops when a round moves the median pose less than this (mm) and less
+    /// than 0.1 degree.
+    pub registration_tolerance_mm: f64,
     /// Reference views (a folder with views.json, camera.json and the images, like the
     /// phantom's truth/): the report then scores the new views against them (Fig. 4).
     pub truth: Option<std::path::PathBuf>,
@@ -91,9 +98,26 @@ impl Default for BuildOptions {
             cross_validate_every: 5,
             cross_validate_max_frames: 24,
             depth_cache_bytes: 1 << 30,
+            // Refinement is not the default yet: from exact poses it moves them by 0.35 mm /
+            // 0.8 degrees (median; demo phantom) and new views lose 4.3 dB (BENCHMARKS.md,
+            // "Registration"), while from tracker-grade poses it gains (same section).
+            poses: PosesMode::Fixed,
+            registration_rounds: 3,
+            registration_tolerance_mm: 0.05,
             truth: None,
             force: false,
             quiet: false,
         }
     }
+}
+
+/// What the build does with the case's poses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PosesMode {
+    /// Refine every frame's pose against the CT (photometric registration), then build.
+    Refine,
+    /// Trust the given poses.
+    #[default]
+    Fixed,
 }

@@ -97,6 +97,14 @@ impl BuildScene {
         g
     }
 
+    /// Keep only the frames `keep` (increasing indices into the current ones), e.g. those the
+    /// registration could trust; the depth cache starts empty.
+    pub fn keep_frames(&mut self, keep: &[usize], cache_bytes: usize) {
+        self.case.poses = keep.iter().map(|&i| self.case.poses[i].clone()).collect();
+        self.poses = keep.iter().map(|&i| self.poses[i]).collect();
+        self.cache = DepthCache::new(self.poses.len(), cache_bytes);
+    }
+
     /// Number of frames.
     pub fn frame_count(&self) -> usize {
         self.poses.len()

@@ -6,15 +6,18 @@ use std::time::Instant;
 
 use super::fit_pass::FitPass;
 use super::options::BuildOptions;
+use super::registration::pose_notes;
 use super::scene::BuildScene;
 use super::textures::Textures;
 use crate::io::atomic::{write_bytes_atomic, write_json_atomic};
 use crate::io::nifti::write_nifti;
 use crate::io::output_dir::OutputDir;
+use crate::io::poses::write_poses_annotated;
 use crate::model::manifest::{
     relative_path, BuildTimings, CrossValidation, ExtraTexture, LightFitSettings, ModelCounts,
     ModelInputs, ModelManifest, MODEL_FORMAT_VERSION, PAPER_TEXTURE_FILE,
 };
+use crate::model::registration::PoseRegistration;
 use crate::model::Model;
 use crate::shading::FittedShading;
 use crate::texture::output::{encode_albedo, write_texture_outputs};
@@ -32,6 +35,8 @@ pub struct BuiltModel<'a> {
     pub shading: &'a FittedShading,
     /// How the calibrated light was fitted, when it was.
     pub light_fit: Option<LightFitSettings>,
+    /// How the poses were registered, when they were.
+    pub registration: Option<PoseRegistration>,
     /// The cross-validation of the shading models, when it ran.
     pub cross_validation: Option<CrossValidation>,
     /// The fused textures.
@@ -85,6 +90,7 @@ fn write_model_files(out_dir: &OutputDir, built: &BuiltModel) -> Result<ModelMan
         &scene.segmentation.mask,
     )?;
     write_json_atomic(&out_dir.join("shading.json"), built.shading)?;
+    write_model_poses(out_dir, built)?;
     let fits = &built.pass.fits;
     let mean_r2 = fits.iter().flat_map(|f| f.r2).sum::<f64>() / (3 * fits.len().max(1)) as f64;
     let case = &scene.case;
@@ -123,10 +129,23 @@ fn write_model_files(out_dir: &OutputDir, built: &BuiltModel) -> Result<ModelMan
         paper_texture,
         cross_validation: built.cross_validation.clone(),
         light_fit: built.light_fit.clone(),
+        registration: built.registration.clone(),
         warnings: built.warnings.clone(),
         atlas_mean_l2_stretch: atlas.stats.mean_l2_stretch,
         atlas_utilisation: atlas.stats.utilisation,
     })
+}
+
+/// poses.json: the pose of every frame of the case as the model was built with it (refined
+/// when the registration ran, with each frame's correction and status), images relative to
+/// the case folder, so it can replace the case's own poses.json.
+fn write_model_poses(out_dir: &OutputDir, built: &BuiltModel) -> Result<()> {
+    let case = &built.scene.case;
+    let tmp = out_dir.join("poses.json");
+    match &built.registration {
+        Some(reg) => write_poses_annotated(&tmp, &reg.refined, &case.dir, &pose_notes(reg)),
+        None => write_poses_annotated(&tmp, &case.poses, &case.dir, &[]),
+    }
 }
 
 /// New views of the written model (against the truth views when given, else between training

@@ -1,0 +1,237 @@
+//! The video's continuity as a prior on the corrections: a tracker's error is a smooth drift
+//! plus per-frame jitter, so the correction of frame f is `d_f + j_f`, d a random walk with
+//! small steps, j independent. Each frame's measured correction `m_f = d_f + j_f + n_f` has a
+//! registration noise n whose size per camera axis is estimated from the video itself (the
+//! scatter of second differences of the corrections, beyond what the jitter explains). The
+//! smoother solves for the drift (a block-tridiagonal least-squares problem over the video) and
+//! keeps from each frame's own measurement the share its jitter explains: where registration
+//! is precise the measured correction stands, where an axis is weakly constrained (roll about
+//! a straight airway, translation along it) the neighbours decide.
+
+use super::pose::PoseDelta;
+use crate::math::Matrix3;
+use nalgebra::{SMatrix, SVector};
+
+type M6 = SMatrix<f64, 6, 6>;
+type V6 = SVector<f64, 6>;
+
+/// The tracker's error model (all per frame, RMS along each axis).
+#[derive(Clone, Debug)]
+pub struct DriftPrior {
+    /// Jitter of the camera centre (mm, 3-D RMS).
+    pub jitter_mm: f64,
+    /// Jitter of the orientation (degrees, RMS angle).
+    pub jitter_deg: f64,
+    /// Change of the drift from one frame to the next (mm, 3-D RMS).
+    pub drift_step_mm: f64,
+    /// Change of the drift's rotation from one frame to the next (degrees).
+    pub drift_step_deg: f64,
+}
+
+impl Default for DriftPrior {
+    fn default() -> Self {
+        DriftPrior {
+            jitter_mm: 0.3,
+            jitter_deg: 0.3,
+            drift_step_mm: 0.1,
+            drift_step_deg: 0.1,
+        }
+    }
+}
+
+/// What the smoother found.
+#[derive(Clone, Debug)]
+pub struct Smoothed {
+    /// The corrections to use, per frame.
+    pub corrections: Vec<PoseDelta>,
+    /// The registration noise estimated per camera axis: x, y, z (mm), rotation about x, y,
+    /// z (degrees).
+    pub noise: [f64; 6],
+}
+
+fn to_v6(d: &PoseDelta) -> V6 {
+    V6::from(d.to_array())
+}
+
+fn diag(v: [f64; 6]) -> M6 {
+    M6::from_diagonal(&V6::from(v))
+}
+
+/// Camera-to-world rotation of both halves of a correction.
+fn block_rot(r: &Matrix3<f64>) -> M6 {
+    let mut b = M6::zeros();
+    b.fixed_view_mut::<3, 3>(0, 0).copy_from(r);
+    b.fixed_view_mut::<3, 3>(3, 3).copy_from(r);
+    b
+}
+
+/// The registration noise per camera axis: robust variance of the second differences of the
+/// corrections (`6 (jitter^2 + noise^2)` for white parts) minus the jitter's share.
+fn estimate_noise(m: &[V6], rot: &[Matrix3<f64>], usable: &[bool], jitter: &[f64; 6]) -> [f64; 6] {
+    let mut per_axis: [Vec<f64>; 6] = Default::default();
+    for f in 1..m.len().saturating_sub(1) {
+        if !(usable[f - 1] && usable[f] && usable[f + 1]) {
+            continue;
+        }
+        let d2 = block_rot(&rot[f]).transpose() * (m[f - 1] - 2.0 * m[f] + m[f + 1]);
+        for (k, v) in per_axis.iter_mut().enumerate() {
+            v.push(d2[k].abs());
+        }
+    }
+    std::array::from_fn(|k| {
+        let v = &mut per_axis[k];
+        if v.len() < 5 {
+            return 0.0;
+        }
+        let mid = v.len() / 2;
+        let mad = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
+        // Median absolute value of a normal deviate is 0.6745 sigma.
+        let var = (mad / 0.6745).powi(2) / 6.0 - jitter[k] * jitter[k];
+        var.max(0.0).sqrt()
+    })
+}
+
+/// Smooth the measured corrections `measured` (relative to the given poses) of a video whose
+/// frames have camera → world rotations `rot`; frames not `usable` (not converged) take the
+/// drift alone. See the module docs.
+pub fn smooth_corrections(
+    measured: &[PoseDelta],
+    rot: &[Matrix3<f64>],
+    usable: &[bool],
+    prior: &DriftPrior,
+) -> Smoothed {
+    let n = measured.len();
+    let m: Vec<V6> = measured.iter().map(to_v6).collect();
+    let jt = prior.jitter_mm / 3f64.sqrt();
+    let jr = prior.jitter_deg.to_radians() / 3f64.sqrt();
+    let jitter = [jt, jt, jt, jr, jr, jr];
+    let noise = estimate_noise(&m, rot, usable, &jitter);
+    let sj = diag(jitter.map(|v| v * v));
+    // Random-walk precision of the drift.
+    let (dt, dr) = (
+        prior.drift_step_mm / 3f64.sqrt(),
+        prior.drift_step_deg.to_radians() / 3f64.sqrt(),
+    );
+    let p = diag([dt, dt, dt, dr, dr, dr].map(|v| 1.0 / (v * v)));
+    // Each frame's precision for the drift: (jitter + noise)^-1, the noise along its camera axes.
+    let info: Vec<M6> = (0..n)
+        .map(|f| {
+            if !usable[f] {
+                return M6::zeros();
+            }
+            let b = block_rot(&rot[f]);
+            let cov = sj + b * diag(noise.map(|v| v * v)) * b.transpose();
+            cov.try_inverse().unwrap_or_else(M6::zeros)
+        })
+        .collect();
+    // Block-tridiagonal system: (J_f + P (links)) d_f - P d_{f-1} - P d_{f+1} = J_f m_f.
+    let mut diag_b: Vec<M6> = (0..n)
+        .map(|f| {
+            let links = (f > 0) as usize + (f + 1 < n) as usize;
+            info[f] + p * links as f64
+        })
+        .collect();
+    let mut rhs: Vec<V6> = (0..n).map(|f| info[f] * m[f]).collect();
+    // Forward elimination (block Thomas); the off-diagonal blocks are all -P.
+    for f in 1..n {
+        let Some(inv) = diag_b[f - 1].try_inverse() else {
+            continue;
+        };
+        let l = p * inv;
+        diag_b[f] -= l * p;
+        rhs[f] = rhs[f] + l * rhs[f - 1];
+    }
+    let mut d = vec![V6::zeros(); n];
+    for f in (0..n).rev() {
+        let r = if f + 1 < n {
+            rhs[f] + p * d[f + 1]
+        } else {
+            rhs[f]
+        };
+        d[f] = diag_b[f].try_inverse().map_or(V6::zeros(), |inv| inv * r);
+    }
+    let corrections = (0..n)
+        .map(|f| {
+            // The frame's own jitter: its share of the measured departure from the drift.
+            let v = d[f] + sj * info[f] * (m[f] - d[f]);
+            PoseDelta::from_array(&v.into())
+        })
+        .collect();
+    Smoothed {
+        corrections,
+        noise: [
+            noise[0],
+            noise[1],
+            noise[2],
+            noise[3].to_degrees(),
+            noise[4].to_degrees(),
+            noise[5].to_degrees(),
+        ],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Vector3;
+    use crate::rng::Pcg32;
+
+    #[test]
+    fn noisy_roll_is_smoothed_and_precise_axes_are_kept() {
+        // 120 frames looking along world +x (camera z = world x), a smooth drift plus jitter as
+        // the true correction; measurements add 2 degrees of noise to the roll (about camera
+        // z) and nothing elsewhere.
+        let n = 120;
+        let r = Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0);
+        let mut rng = Pcg32::new(3, 1);
+        let truth: Vec<PoseDelta> = (0..n)
+            .map(|f| {
+                let t = f as f64 / n as f64;
+                PoseDelta {
+                    translation_mm: Vector3::new(1.0 + t, (6.0 * t).sin(), 0.5)
+                        + Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.17,
+                    rotation: Vector3::new(0.02 * (4.0 * t).cos(), 0.01, -0.02)
+                        + Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.003,
+                }
+            })
+            .collect();
+        let measured: Vec<PoseDelta> = truth
+            .iter()
+            .map(|d| PoseDelta {
+                rotation: d.rotation
+                    + Vector3::new(1.0, 0.0, 0.0) * 2f64.to_radians() * rng.normal(),
+                ..*d
+            })
+            .collect();
+        let s = smooth_corrections(
+            &measured,
+            &vec![r; n],
+            &vec![true; n],
+            &DriftPrior::default(),
+        );
+        // The roll noise is found (about 2 degrees), the other axes are clean.
+        assert!((s.noise[5] - 2.0).abs() < 0.5, "{:?}", s.noise);
+        assert!(s.noise[0] < 0.05 && s.noise[3] < 0.1, "{:?}", s.noise);
+        let rms = |a: &[PoseDelta], f: &dyn Fn(&PoseDelta) -> f64| {
+            (a.iter()
+                .zip(&truth)
+                .map(|(x, t)| (f(x) - f(t)).powi(2))
+                .sum::<f64>()
+                / n as f64)
+                .sqrt()
+        };
+        let roll = |d: &PoseDelta| d.rotation.x.to_degrees();
+        let (before, after) = (rms(&measured, &roll), rms(&s.corrections, &roll));
+        assert!(
+            after < 0.3 * before,
+            "roll error {before:.3} -> {after:.3} deg"
+        );
+        // Translations were measured exactly: they stay within a hundredth of a mm.
+        let tx = |d: &PoseDelta| d.translation_mm.y;
+        assert!(
+            rms(&s.corrections, &tx) < 0.01,
+            "{}",
+            rms(&s.corrections, &tx)
+        );
+    }
+}

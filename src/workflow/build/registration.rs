@@ -1,0 +1,247 @@
+//! The registration stage (issue 16): every frame's pose refined against the CT before the
+//! model is fitted with them. Rounds alternate (a) the light and a consensus texture
+//! fitted with the current poses and (b) every frame registered against that model
+//! ([`crate::registration`]), until the poses stop moving or the rounds run out.
+//!
+//! The first round registers against the geometry's shading alone (each frame divided by the
+//! albedo its colour predicts): a texture fused from the given poses follows their errors, and
+//! frames registered against it stay where they were. Frames that end flagged (a wrong given
+//! pose, too few comparable pixels, a cost far above the video's) are left out of the model,
+//! never silently kept: [`PoseRegistration`] says which and why, and model.json counts them.
+
+use super::error::BuildError;
+use super::fit_pass::fit_pass;
+use super::frames::DepthCache;
+use super::light::{calibrated_light, Consensus};
+use super::options::{BuildOptions, PosesMode};
+use super::scene::BuildScene;
+use crate::camera::Pose;
+use crate::image::Frame;
+use crate::io::poses::PoseEntry;
+use crate::model::registration::{FramePoseResult, PoseRegistration, RoundSummary};
+use crate::registration::{
+    delta_between, register_round, FrameRegistration, FrameStatus, ModelParts, RoundKind,
+    RoundOptions,
+};
+use crate::render::{MipOptions, MipTexture};
+use crate::shading::calibrated::CalibratedModel;
+use crate::Result;
+use std::time::Instant;
+
+/// A frame whose registration is not to be trusted.
+fn flagged(status: FrameStatus) -> bool {
+    !matches!(status, FrameStatus::Converged | FrameStatus::NotConverged)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
+}
+
+/// Refine the poses of `scene` (unless `opts.poses` is [`PosesMode::Fixed`]); flagged frames
+/// are removed from the scene. `None` when the poses were trusted as given.
+pub fn register_poses(
+    scene: &mut BuildScene,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+) -> Result<Option<PoseRegistration>> {
+    if opts.poses == PosesMode::Fixed || opts.registration_rounds == 0 {
+        return Ok(None);
+    }
+    let frames: Vec<Frame> = scene
+        .case
+        .frame_source()?
+        .collect::<std::result::Result<_, _>>()?;
+    let given = scene.poses.clone();
+    let mut rounds = Vec::new();
+    let mut last: Vec<FrameRegistration> = Vec::new();
+    for r in 0..opts.registration_rounds {
+        let kind = if r == 0 {
+            RoundKind::Geometry
+        } else {
+            RoundKind::Texture
+        };
+        let (summary, frames_done) = run_round(scene, &frames, kind, opts, warnings)?;
+        let settled = r > 0
+            && summary.median_step_mm < opts.registration_tolerance_mm
+            && summary.median_step_deg < 0.1;
+        rounds.push(summary);
+        last = frames_done;
+        if settled {
+            break;
+        }
+    }
+    let results: Vec<FramePoseResult> = last
+        .iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let d = delta_between(&given[i], &f.pose);
+            FramePoseResult {
+                frame: i,
+                correction_mm: d.mm(),
+                correction_deg: d.deg(),
+                status: f.status.name().to_string(),
+                used: !flagged(f.status),
+            }
+        })
+        .collect();
+    let refined: Vec<PoseEntry> = scene
+        .case
+        .poses
+        .iter()
+        .zip(&scene.poses)
+        .map(|(e, p)| PoseEntry {
+            frame: e.frame.clone(),
+            pose: Pose::new(*p),
+        })
+        .collect();
+    let keep: Vec<usize> = (0..results.len()).filter(|&i| results[i].used).collect();
+    let left_out = results.len() - keep.len();
+    if keep.len() < 2 {
+        return Err(BuildError::Registration(format!(
+            "only {} of {} frames registered to the CT; check the poses (or build with --poses fixed)",
+            keep.len(),
+            results.len()
+        ))
+        .into());
+    }
+    if left_out > 0 {
+        warnings.push(format!(
+            "registration left out {left_out} of {} frames whose pose could not be trusted (model.json registration.frames says which and why)",
+            results.len()
+        ));
+        scene.keep_frames(&keep, opts.depth_cache_bytes);
+    }
+    Ok(Some(PoseRegistration {
+        frames: results,
+        rounds,
+        left_out,
+        given,
+        refined,
+    }))
+}
+
+/// One round: light and consensus texture at the scene's current poses, then every frame
+/// registered against them as a round of `kind`; the scene's poses are moved to the result.
+fn run_round(
+    scene: &mut BuildScene,
+    frames: &[Frame],
+    kind: RoundKind,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+) -> Result<(RoundSummary, Vec<FrameRegistration>)> {
+    let started = Instant::now();
+    let light = round_light(scene, opts, warnings)?;
+    // A geometry round still needs the texture: the colour–albedo relation it divides
+    // the frames by is fitted on it.
+    let texture = consensus_texture(scene, &light, opts)?;
+    let parts = ModelParts {
+        scene: &scene.scene,
+        tri_uv: &scene.tri_uv,
+        texture: Some(&texture),
+        light: &light,
+        camera: &scene.case.camera,
+    };
+    let mask = scene.case.mask.as_ref().map(|m| m.image.as_slice());
+    let video = register_round(
+        parts,
+        frames,
+        &light.gains,
+        mask,
+        &scene.poses,
+        kind,
+        &RoundOptions::default(),
+    )?;
+    let steps: Vec<(f64, f64)> = video
+        .frames
+        .iter()
+        .zip(&scene.poses)
+        .map(|(f, p)| {
+            let d = delta_between(p, &f.pose);
+            (d.mm(), d.deg())
+        })
+        .collect();
+    for (pose, f) in scene.poses.iter_mut().zip(&video.frames) {
+        *pose = f.pose;
+    }
+    let (step_mm, step_deg) = (
+        median(steps.iter().map(|s| s.0).collect()),
+        median(steps.iter().map(|s| s.1).collect()),
+    );
+    let summary = RoundSummary {
+        against: match kind {
+            RoundKind::Geometry => "geometry",
+            RoundKind::Texture => "texture",
+        }
+        .to_string(),
+        median_step_mm: step_mm,
+        median_step_deg: step_deg,
+        counts: video.counts.clone(),
+        seconds: started.elapsed().as_secs_f64(),
+    };
+    scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes);
+    Ok((summary, video.frames))
+}
+
+/// The calibrated light fitted with the scene's current poses (a first pass and the pooled
+/// fit with its refinements).
+fn round_light(
+    scene: &mut BuildScene,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+) -> Result<CalibratedModel> {
+    let (_, samples) = fit_pass(scene, opts)?;
+    let mut round_warnings = Vec::new();
+    let light = calibrated_light(scene, samples, opts, &mut round_warnings)?;
+    warnings.extend(
+        round_warnings
+            .into_iter()
+            .map(|w| format!("registration: {w}")),
+    );
+    light.map(|l| l.model).ok_or_else(|| {
+        BuildError::Registration(
+            "no calibrated light could be fitted to register against (build with --poses fixed)"
+                .to_string(),
+        )
+        .into()
+    })
+}
+
+/// The consensus albedo of every frame de-lit with `light` at the current poses, with its
+/// mip chain: what the texture rounds register against.
+fn consensus_texture(
+    scene: &BuildScene,
+    light: &CalibratedModel,
+    opts: &BuildOptions,
+) -> Result<MipTexture> {
+    let fused = Consensus::new(scene, opts).fuse(light, "registration texture")?;
+    let rgb = fused.filled(&scene.texels)?;
+    let image = Frame {
+        width: fused.width,
+        height: fused.height,
+        rgb,
+    };
+    MipTexture::new(&image, None, opts.atlas.texel_mm, &MipOptions::default())
+}
+
+/// The notes poses.json carries per frame after a registration: correction and status.
+pub fn pose_notes(
+    registration: &PoseRegistration,
+) -> Vec<serde_json::Map<String, serde_json::Value>> {
+    registration
+        .frames
+        .iter()
+        .map(|f| {
+            let mut m = serde_json::Map::new();
+            m.insert("correction_mm".into(), round3(f.correction_mm).into());
+            m.insert("correction_deg".into(), round3(f.correction_deg).into());
+            m.insert("status".into(), f.status.clone().into());
+            m.insert("used".into(), f.used.into());
+            m
+        })
+        .collect()
+}
+
+fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}

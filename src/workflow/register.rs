@@ -1,0 +1,164 @@
+//! `bronchosim register CASE --out DIR`: the registration stage of the build on its own (the
+//! paper's Fig. 1 "2D/3D registration"): every frame's pose refined against the CT, written as
+//! DIR/poses.json (images relative to the case folder, so it can replace the case's own, with
+//! each frame's correction and status), DIR/registration.json and DIR/report.html.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use crate::io::atomic::{write_bytes_atomic, write_json_atomic};
+use crate::io::output_dir::OutputDir;
+use crate::io::poses::write_poses_annotated;
+use crate::model::manifest::BuildTimings;
+use crate::model::registration::PoseRegistration;
+use crate::workflow::build::PosesMode;
+use crate::workflow::build::{pose_notes, register_poses, BuildError, BuildOptions, BuildScene};
+use crate::Result;
+
+/// What `register` did.
+pub struct RegisterSummary {
+    /// The registration.
+    pub registration: PoseRegistration,
+    /// Warnings (frames left out, a light that could not be fitted as asked).
+    pub warnings: Vec<String>,
+    /// Wall time (s).
+    pub seconds: f64,
+}
+
+/// Register the poses of the case in `case_dir` to its CT into the folder `out` (atomically;
+/// an existing `out` only with `opts.force`).
+pub fn register_command(
+    case_dir: &Path,
+    out: &Path,
+    opts: &BuildOptions,
+) -> Result<RegisterSummary> {
+    let started = std::time::Instant::now();
+    let out_dir = OutputDir::create(out, opts.force)?;
+    let opts = BuildOptions {
+        poses: PosesMode::Refine,
+        ..opts.clone()
+    };
+    let mut timings = BuildTimings::default();
+    let mut scene = BuildScene::prepare(case_dir, &opts, &mut timings)?;
+    let mut warnings = Vec::new();
+    let registration = register_poses(&mut scene, &opts, &mut warnings)?
+        .ok_or_else(|| BuildError::Registration("--registration-rounds 0: nothing to do".into()))?;
+    write_poses_annotated(
+        &out_dir.join("poses.json"),
+        &registration.refined,
+        &scene.case.dir,
+        &pose_notes(&registration),
+    )?;
+    let record = serde_json::json!({
+        "case": scene.case.dir.display().to_string(),
+        "registration": &registration,
+        "warnings": &warnings,
+        "seconds": started.elapsed().as_secs_f64(),
+    });
+    write_json_atomic(&out_dir.join("registration.json"), &record)?;
+    write_bytes_atomic(
+        &out_dir.join("report.html"),
+        registration_report(&registration, &scene.case.dir).as_bytes(),
+    )?;
+    out_dir.commit()?;
+    Ok(RegisterSummary {
+        registration,
+        warnings,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// A self-contained HTML page: the corrections over the video (mm and degrees), the rounds and
+/// every flagged frame.
+pub fn registration_report(reg: &PoseRegistration, case_dir: &Path) -> String {
+    let mm: Vec<f64> = reg.frames.iter().map(|f| f.correction_mm).collect();
+    let deg: Vec<f64> = reg.frames.iter().map(|f| f.correction_deg).collect();
+    let mut html = format!(
+        "<!doctype html><meta charset=utf-8><title>bronchosim registration</title>\
+         <style>body{{font-family:sans-serif;max-width:60em;margin:2em auto}}td,th{{padding:0 .6em}}</style>\
+         <h1>Registration of {}</h1><p>{} frames, {} left out of the model.</p>",
+        html_escape(&case_dir.display().to_string()),
+        reg.frames.len(),
+        reg.left_out
+    );
+    html.push_str("<h2>Correction of every frame's pose</h2>");
+    html.push_str(&line_plot(&mm, "camera centre moved (mm)", "#1f77b4"));
+    html.push_str(&line_plot(&deg, "camera turned (degrees)", "#d62728"));
+    html.push_str("<h2>Rounds</h2><table><tr><th>round</th><th>against</th><th>median step (mm)</th><th>median step (deg)</th><th>statuses</th><th>s</th></tr>");
+    for (i, r) in reg.rounds.iter().enumerate() {
+        let counts: Vec<String> = r.counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
+        let _ = write!(
+            html,
+            "<tr><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{:.1}</td></tr>",
+            i + 1,
+            r.against,
+            r.median_step_mm,
+            r.median_step_deg,
+            counts.join(", "),
+            r.seconds
+        );
+    }
+    html.push_str("</table><h2>Flagged frames</h2>");
+    let flagged: Vec<String> = reg
+        .frames
+        .iter()
+        .filter(|f| f.status != "converged")
+        .map(|f| {
+            format!(
+                "<tr><td>{}</td><td>{}</td><td>{:.2}</td><td>{:.2}</td><td>{}</td></tr>",
+                f.frame,
+                f.status,
+                f.correction_mm,
+                f.correction_deg,
+                if f.used { "yes" } else { "no" }
+            )
+        })
+        .collect();
+    if flagged.is_empty() {
+        html.push_str("<p>None: every frame converged.</p>");
+    } else {
+        html.push_str(
+            "<table><tr><th>frame</th><th>status</th><th>mm</th><th>deg</th><th>used</th></tr>",
+        );
+        html.push_str(&flagged.concat());
+        html.push_str("</table>");
+    }
+    html
+}
+
+/// An inline SVG line plot of `values` over the frame index.
+fn line_plot(values: &[f64], label: &str, colour: &str) -> String {
+    let (w, h, pad) = (640.0, 160.0, 30.0);
+    let top = values.iter().cloned().fold(0.0_f64, f64::max).max(1e-9);
+    let n = values.len().max(2) as f64 - 1.0;
+    let points: Vec<String> = values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let x = pad + (w - 2.0 * pad) * i as f64 / n;
+            let y = h - pad - (h - 2.0 * pad) * (v / top);
+            format!("{x:.1},{y:.1}")
+        })
+        .collect();
+    format!(
+        "<figure><svg width={w} height={h} viewBox='0 0 {w} {h}' role=img>\
+         <line x1={pad} y1={b} x2={r} y2={b} stroke=#888 />\
+         <line x1={pad} y1={pad} x2={pad} y2={b} stroke=#888 />\
+         <text x={pad} y={t} font-size=11>{top:.2}</text>\
+         <text x={pad} y={bl} font-size=11>0 (frame 0 … {last})</text>\
+         <polyline fill=none stroke='{colour}' stroke-width=1.5 points='{}' /></svg>\
+         <figcaption>{label}</figcaption></figure>",
+        points.join(" "),
+        b = h - pad,
+        r = w - pad,
+        t = pad - 6.0,
+        bl = h - 8.0,
+        last = values.len().saturating_sub(1),
+    )
+}
+
+fn html_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
