@@ -81,3 +81,42 @@ fn a_mask_of_the_wrong_size_is_refused_naming_the_file() {
     assert!(err.contains("mask.png") && err.contains("32x32"), "{err}");
     assert_eq!(err.trim().lines().count(), 1, "{err}");
 }
+
+#[test]
+fn inspect_reports_the_mask_or_a_black_border_without_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    ok(&run(
+        &[
+            "phantom",
+            "--out",
+            "case",
+            "--frames",
+            "3",
+            "--size",
+            "96x96",
+            "--scope-overlay",
+            "--quiet",
+        ],
+        dir,
+    ));
+    let o = run(&["inspect", "case"], dir);
+    ok(&o);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("mask.png:") && text.contains("% of each frame is image"),
+        "{text}"
+    );
+    std::fs::remove_file(dir.join("case/mask.png")).unwrap();
+    let o = run(&["inspect", "case"], dir);
+    ok(&o);
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(out.contains("no mask.png"), "{out}");
+    assert!(
+        err.contains("black border") && err.contains("add one"),
+        "{err}"
+    );
+}

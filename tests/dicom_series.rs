@@ -181,19 +181,6 @@ fn missing_folder_is_an_error() {
 }
 
 #[test]
-fn jpeg2000_fails_naming_the_syntax() {
-    expect_error(
-        "jpeg2000",
-        &[
-            "jpeg2000/j",
-            "1.2.840.10008.1.2.4.90",
-            "JPEG 2000 Image Compression (Lossless Only)",
-            "unsupported",
-        ],
-    );
-}
-
-#[test]
 fn unknown_transfer_syntax_fails_naming_the_uid() {
     expect_error(
         "unknown_syntax",

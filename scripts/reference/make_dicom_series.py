@@ -9,8 +9,9 @@ Good series (read by SimpleITK's ImageSeriesReader, world points converted LPS -
                 numbers run against the slice normal), slope 1 / intercept -1024
   axial_rle     axial re-encoded with RLE Lossless (must equal axial voxel for voxel)
   single_slice  one 8-bit slice, slope 2 / intercept -1000, SliceThickness 2.5 mm
+  jpeg2000      genuine JPEG 2000 Lossless slices (encoded by GDCM via SimpleITK); its reference
+                values are written by make_real_dicom_series.py
 Bad series (each must fail with a message naming the folder/file and the problem):
-  jpeg2000      genuine JPEG 2000 Lossless slices (encoded by GDCM via SimpleITK)
   unknown_syntax  a transfer syntax UID no registry knows
   mixed_series  two SeriesInstanceUIDs
   mixed_size    one slice with different Rows/Columns

@@ -32,6 +32,24 @@ pub struct CtInfo {
     pub affine_source: String,
     /// Warnings a person should see (e.g. a NIfTI without orientation).
     pub warnings: Vec<String>,
+    /// What a DICOM series says about itself (None for NIfTI).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dicom: Option<DicomCtInfo>,
+}
+
+/// The parts of a DICOM series' headers a person checks after reading it.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct DicomCtInfo {
+    /// Transfer syntax of the first slice as "UID (name)".
+    pub transfer_syntax: String,
+    /// Number of slice files read.
+    pub slices: usize,
+    /// Distance between adjacent slices along the slice normal (mm).
+    pub slice_step_mm: f64,
+    /// Modality, e.g. "CT" (may be empty).
+    pub modality: String,
+    /// SeriesDescription (may be empty).
+    pub series_description: String,
 }
 
 /// Find the CT of the case in `case_dir`: exactly one of ct.nii.gz, ct.nii or ct/.
@@ -88,17 +106,30 @@ pub fn read_ct(source: &CtSource) -> Result<(Volume<f32>, CtInfo)> {
                     format: "nifti",
                     affine_source: source,
                     warnings: info.warnings,
+                    dicom: None,
                 },
             ))
         }
         CtSource::Dicom(dir) => {
-            let vol = dicom::read_dicom_series(dir)?;
+            let (vol, s) = dicom::read_dicom_series_with_info(dir)?;
+            let transfer_syntax = if s.transfer_syntax_name.is_empty() {
+                s.transfer_syntax_uid.clone()
+            } else {
+                format!("{} ({})", s.transfer_syntax_uid, s.transfer_syntax_name)
+            };
             Ok((
                 vol,
                 CtInfo {
                     format: "dicom",
                     affine_source: "ImagePositionPatient/ImageOrientationPatient (LPS→RAS)".into(),
                     warnings: Vec::new(),
+                    dicom: Some(DicomCtInfo {
+                        transfer_syntax,
+                        slices: s.files.len(),
+                        slice_step_mm: s.slice_step_mm,
+                        modality: s.modality,
+                        series_description: s.series_description,
+                    }),
                 },
             ))
         }

@@ -19,12 +19,16 @@
 //! - A single-slice series takes its slice spacing from SpacingBetweenSlices, else
 //!   SliceThickness, else fails.
 //! - A header whose Rows × Columns × BitsAllocated exceed what the file could hold (1024× its
-//!   size for compressed syntaxes) is rejected before any pixel buffer is allocated.
-//! - Pixel data in a transfer syntax this build cannot decode (JPEG 2000, JPEG-LS, ...) fails
-//!   with a message giving the syntax's UID and name.
+//!   size for compressed and deflated syntaxes) is rejected before any pixel buffer is allocated.
+//! - Pixel data in a transfer syntax this build cannot decode (JPEG-LS, 12-bit JPEG Extended,
+//!   JPEG XL, ...) fails with a message giving the syntax's UID and name. JPEG 2000 (.4.90,
+//!   .4.91), HTJ2K (.4.201-.4.203) and RLE go through our own adapters (`j2k.rs`, `pixels.rs`),
+//!   which check the codestream against the header and return errors where dicom-pixeldata's
+//!   would panic on damaged data.
 
 mod geometry;
 mod header;
+mod j2k;
 mod pixels;
 mod scan;
 

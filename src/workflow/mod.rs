@@ -2,6 +2,7 @@
 //! they chain the stages and write results atomically. `main.rs` only parses and calls these.
 
 pub mod build;
+pub mod convert;
 pub mod demo;
 pub mod flythrough;
 pub mod new_views_figure;

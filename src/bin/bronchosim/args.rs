@@ -33,8 +33,11 @@ fn segment_defaults() -> SegmentCommandOptions {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Validate a case folder (CT, camera, poses, frames) and print a summary.
+    /// Validate a case folder (CT, camera, poses, frames), or a bare CT, and print a summary.
     Inspect(InspectArgs),
+    /// Convert a CT (a DICOM folder, a NIfTI file or a case's CT) to one NIfTI file in HU with
+    /// its affine, as 3D Slicer and ITK-SNAP open it.
+    Convert(ConvertArgs),
     /// Segment the airway in a CT and extract the lumen mesh (segmentation.nii.gz,
     /// lumen.ply/.obj/.glb, summary.json).
     Segment(SegmentArgs),
@@ -61,7 +64,7 @@ pub enum Command {
 /// The arguments of `bronchosim inspect`.
 #[derive(Args, Debug)]
 pub struct InspectArgs {
-    /// The case folder (see CASE_FORMAT.md).
+    /// A case folder (see CASE_FORMAT.md), a NIfTI file (.nii / .nii.gz) or a DICOM folder.
     pub case: PathBuf,
     /// Print the summary as JSON instead of text.
     #[arg(long)]
@@ -69,6 +72,19 @@ pub struct InspectArgs {
     /// Only read frame headers instead of decoding every frame (faster, checks less).
     #[arg(long)]
     pub quick: bool,
+}
+
+/// The arguments of `bronchosim convert`.
+#[derive(Args, Debug)]
+pub struct ConvertArgs {
+    /// A DICOM folder, a NIfTI file (.nii / .nii.gz) or a case folder.
+    pub input: PathBuf,
+    /// The NIfTI file to write (.nii or .nii.gz).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Replace an existing output file.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// The arguments of `bronchosim segment`.

@@ -5,10 +5,10 @@ mod args;
 
 use anyhow::Context;
 use args::{
-    BuildArgs, Cli, Command, DemoArgs, EvaluateArgs, FlythroughArgs, InspectArgs, PhantomArgs,
-    RenderArgs, SegmentArgs,
+    BuildArgs, Cli, Command, ConvertArgs, DemoArgs, EvaluateArgs, FlythroughArgs, InspectArgs,
+    PhantomArgs, RenderArgs, SegmentArgs,
 };
-use bronchosim::inspect::{inspect_case, InspectOptions};
+use bronchosim::inspect::{inspect, InspectOptions};
 use bronchosim::math::Point3;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::render::evaluate::scores_text;
@@ -16,6 +16,7 @@ use bronchosim::render::{evaluate_folders, RenderOptions};
 use bronchosim::shading::paper::PsiLookup;
 use bronchosim::texture::fusion::{FusionKind, FusionMethod};
 use bronchosim::workflow::build::{build_model, BuildOptions};
+use bronchosim::workflow::convert::{convert_ct, ConvertOptions};
 use bronchosim::workflow::demo::run_demo;
 use bronchosim::workflow::flythrough::{flythrough, FlythroughOptions};
 use bronchosim::workflow::render::{render_command, RenderCommandOptions};
@@ -31,7 +32,8 @@ fn run(command: Command, quiet: bool) -> anyhow::Result<String> {
         Command::Demo(a) => demo(a, quiet),
         Command::Build(a) => build(a, quiet),
         Command::Segment(a) => segment(a),
-        Command::Inspect(a) => inspect(a, quiet),
+        Command::Inspect(a) => inspect_ct_or_case(a, quiet),
+        Command::Convert(a) => convert(a, quiet),
         Command::Phantom(a) => phantom(a),
         Command::Render(a) => render(a),
         Command::Flythrough(a) => fly(a, quiet),
@@ -101,12 +103,12 @@ fn segment(a: SegmentArgs) -> anyhow::Result<String> {
     Ok(summary.to_text(&out))
 }
 
-fn inspect(a: InspectArgs, quiet: bool) -> anyhow::Result<String> {
+fn inspect_ct_or_case(a: InspectArgs, quiet: bool) -> anyhow::Result<String> {
     let opts = InspectOptions {
         decode_all_frames: !a.quick,
     };
     let report =
-        inspect_case(&a.case, &opts).with_context(|| format!("inspect {}", a.case.display()))?;
+        inspect(&a.case, &opts).with_context(|| format!("inspect {}", a.case.display()))?;
     if !quiet {
         for w in &report.warnings {
             eprintln!("warning: {w}");
@@ -118,6 +120,17 @@ fn inspect(a: InspectArgs, quiet: bool) -> anyhow::Result<String> {
         false => print!("{}", report.to_text()),
     }
     Ok(String::new())
+}
+
+fn convert(a: ConvertArgs, quiet: bool) -> anyhow::Result<String> {
+    let s = convert_ct(&a.input, &a.out, &ConvertOptions { force: a.force })
+        .with_context(|| format!("convert {}", a.input.display()))?;
+    if !quiet {
+        for w in &s.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
+    Ok(s.to_text())
 }
 
 fn phantom(a: PhantomArgs) -> anyhow::Result<String> {

@@ -128,9 +128,9 @@ pub(crate) struct SliceHeader {
     pub intercept: f64,
 }
 
-/// Transfer syntaxes whose pixel data dicom-pixeldata decodes with the features this crate
-/// enables (`native`: uncompressed, deflate, RLE, JPEG baseline/extended/lossless). Extend
-/// this list when enabling `openjp2` or `charls` in Cargo.toml.
+/// Transfer syntaxes whose pixel data this build decodes: dicom-pixeldata's `native` feature
+/// (uncompressed, deflate, JPEG baseline/extended/lossless), our RLE decoder and our JPEG 2000
+/// adapter (`j2k.rs`).
 const DECODABLE_SYNTAXES: &[&str] = &[
     "1.2.840.10008.1.2",
     "1.2.840.10008.1.2.1",
@@ -141,6 +141,11 @@ const DECODABLE_SYNTAXES: &[&str] = &[
     "1.2.840.10008.1.2.4.51",
     "1.2.840.10008.1.2.4.57",
     "1.2.840.10008.1.2.4.70",
+    "1.2.840.10008.1.2.4.90",
+    "1.2.840.10008.1.2.4.91",
+    "1.2.840.10008.1.2.4.201",
+    "1.2.840.10008.1.2.4.202",
+    "1.2.840.10008.1.2.4.203",
     "1.2.840.10008.1.2.5",
 ];
 
@@ -221,8 +226,8 @@ pub(crate) fn describe_syntax(uid: &str) -> String {
 }
 
 /// Largest decoded/encoded size ratio accepted for compressed pixel data before decoding:
-/// RLE reaches 64:1 on constant rows and JPEG a few hundred to one on flat images; anything
-/// beyond this is a header lying about the image size.
+/// RLE reaches 64:1 on constant rows, JPEG a few hundred to one on flat images and deflate at
+/// most 1032:1; anything beyond this is a header lying about the image size.
 const MAX_COMPRESSION_RATIO: u64 = 1024;
 
 fn text(obj: &DefaultDicomObject, tag: dicom_object::Tag) -> String {
@@ -305,62 +310,23 @@ impl SliceHeader {
             ));
         }
         let bits_allocated = uint(tags::BITS_ALLOCATED, "BitsAllocated")? as u16;
-        if bits_allocated != 8 && bits_allocated != 16 {
-            return Err(Error::unsupported(
-                name,
-                format!("BitsAllocated {bits_allocated}; only 8 and 16 are supported"),
-            ));
-        }
         let bits_stored =
             uint(tags::BITS_STORED, "BitsStored").unwrap_or(bits_allocated as u32) as u16;
-        let high_bit = uint(tags::HIGH_BIT, "HighBit").unwrap_or(bits_stored as u32 - 1) as u16;
-        if bits_stored == 0
-            || bits_stored > bits_allocated
-            || high_bit >= bits_allocated
-            || high_bit + 1 < bits_stored
-        {
-            return Err(Error::invalid(
-                name,
-                format!("inconsistent BitsAllocated {bits_allocated}, BitsStored {bits_stored}, HighBit {high_bit}"),
-            ));
-        }
+        let high_bit = uint(tags::HIGH_BIT, "HighBit")
+            .unwrap_or((bits_stored as u32).saturating_sub(1)) as u16;
+        check_bits(name, bits_allocated, bits_stored, high_bit)?;
         let signed = uint(tags::PIXEL_REPRESENTATION, "PixelRepresentation").unwrap_or(0) == 1;
 
-        // The size check comes before any pixel buffer exists: a corrupt or hostile header must
-        // not make us allocate gigabytes (saturating: a malformed file may store Rows/Columns as 32-bit).
-        let needed = (rows as u64)
-            .saturating_mul(cols as u64)
-            .saturating_mul(bits_allocated as u64 / 8);
-        let encapsulated = !matches!(
-            transfer_syntax.as_str(),
-            "1.2.840.10008.1.2"
-                | "1.2.840.10008.1.2.1"
-                | "1.2.840.10008.1.2.2"
-                | "1.2.840.10008.1.2.1.99"
-        );
-        let limit = if encapsulated {
-            file_len.saturating_mul(MAX_COMPRESSION_RATIO)
-        } else {
-            file_len
-        };
-        if needed > limit {
-            return Err(Error::invalid(
-                name,
-                format!(
-                    "header claims {cols}x{rows} pixels of {bits_allocated} bits ({needed} bytes), more than a {file_len}-byte file can hold"
-                ),
-            ));
-        }
-        if !DECODABLE_SYNTAXES.contains(&transfer_syntax.as_str()) {
-            return Err(Error::unsupported(
-                name,
-                format!(
-                    "pixel data in transfer syntax {} cannot be decoded by this build (supported: uncompressed, deflate, RLE, JPEG baseline/extended/lossless)",
-                    describe_syntax(&transfer_syntax)
-                ),
-            ));
-        }
-
+        // Before any pixel buffer exists: a corrupt or hostile header must not make us
+        // allocate gigabytes, nor reach a decoder this build lacks.
+        let encapsulated = check_pixel_budget(
+            name,
+            &transfer_syntax,
+            [cols, rows],
+            bits_allocated,
+            file_len,
+        )?;
+        check_decodable(name, &transfer_syntax, bits_stored)?;
         let position = floats(tags::IMAGE_POSITION_PATIENT, "ImagePositionPatient", 3)?;
         let orientation = floats(
             tags::IMAGE_ORIENTATION_PATIENT,
@@ -397,4 +363,85 @@ impl SliceHeader {
             intercept: opt_float(tags::RESCALE_INTERCEPT).unwrap_or(0.0),
         })
     }
+}
+
+/// Fail when Rows x Columns x BitsAllocated exceed what a `file_len`-byte file in `ts` can hold
+/// (saturating: a malformed file may store Rows/Columns as 32-bit). Returns whether the pixel
+/// data is encapsulated (compressed) and must go through a decoder.
+fn check_pixel_budget(
+    name: &Path,
+    ts: &str,
+    [cols, rows]: [u32; 2],
+    bits_allocated: u16,
+    file_len: u64,
+) -> Result<bool> {
+    let needed = (rows as u64)
+        .saturating_mul(cols as u64)
+        .saturating_mul(bits_allocated as u64 / 8);
+    let deflated = ts == "1.2.840.10008.1.2.1.99";
+    let encapsulated = !deflated
+        && !matches!(
+            ts,
+            "1.2.840.10008.1.2" | "1.2.840.10008.1.2.1" | "1.2.840.10008.1.2.2"
+        );
+    // A deflated data set holds native pixels, but compressed with the rest of the file.
+    let limit = if encapsulated || deflated {
+        file_len.saturating_mul(MAX_COMPRESSION_RATIO)
+    } else {
+        file_len
+    };
+    if needed > limit {
+        return Err(Error::invalid(
+            name,
+            format!(
+                "header claims {cols}x{rows} pixels of {bits_allocated} bits ({needed} bytes), more than a {file_len}-byte file can hold"
+            ),
+        ));
+    }
+    Ok(encapsulated)
+}
+
+/// Fail, naming the syntax, when this build has no decoder for pixel data in `ts`.
+fn check_decodable(name: &Path, ts: &str, bits_stored: u16) -> Result<()> {
+    if !DECODABLE_SYNTAXES.contains(&ts) {
+        return Err(Error::unsupported(
+            name,
+            format!(
+                "pixel data in transfer syntax {} cannot be decoded by this build (supported: uncompressed, deflate, RLE, JPEG baseline/extended 8-bit/lossless, JPEG 2000, HTJ2K)",
+                describe_syntax(ts)
+            ),
+        ));
+    }
+    if ts == "1.2.840.10008.1.2.4.51" && bits_stored > 8 {
+        // Process 4: jpeg-decoder 0.3 decodes 8-bit DCT (process 2) only.
+        return Err(Error::unsupported(
+            name,
+            format!(
+                "pixel data in transfer syntax {} with {bits_stored} bits stored (12-bit DCT) cannot be decoded by this build; 8-bit JPEG Extended can",
+                describe_syntax(ts)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Fail unless BitsAllocated is 8 or 16 and BitsStored / HighBit fit inside it.
+fn check_bits(name: &Path, bits_allocated: u16, bits_stored: u16, high_bit: u16) -> Result<()> {
+    if bits_allocated != 8 && bits_allocated != 16 {
+        return Err(Error::unsupported(
+            name,
+            format!("BitsAllocated {bits_allocated}; only 8 and 16 are supported"),
+        ));
+    }
+    if bits_stored == 0
+        || bits_stored > bits_allocated
+        || high_bit >= bits_allocated
+        || high_bit + 1 < bits_stored
+    {
+        return Err(Error::invalid(
+            name,
+            format!("inconsistent BitsAllocated {bits_allocated}, BitsStored {bits_stored}, HighBit {high_bit}"),
+        ));
+    }
+    Ok(())
 }

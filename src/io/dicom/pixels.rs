@@ -4,9 +4,19 @@ use dicom_dictionary_std::tags;
 use dicom_pixeldata::PixelDecoder;
 
 use super::header::{describe_syntax, SliceHeader, Source};
+use super::j2k;
 use crate::{Error, Result};
 
 const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
+/// JPEG 2000 Image Compression (Lossless Only), JPEG 2000 Image Compression, and High-Throughput
+/// JPEG 2000 (Lossless Only, with RPCL Options, lossy): one codestream syntax, one decoder.
+pub(crate) const JPEG_2000: [&str; 5] = [
+    "1.2.840.10008.1.2.4.90",
+    "1.2.840.10008.1.2.4.91",
+    "1.2.840.10008.1.2.4.201",
+    "1.2.840.10008.1.2.4.202",
+    "1.2.840.10008.1.2.4.203",
+];
 
 /// Decode the pixels of `src` (whose header is `h`) into `out` (one slice, i fastest), applying
 /// BitsStored/HighBit masking, sign extension and RescaleSlope/Intercept.
@@ -24,6 +34,9 @@ pub(crate) fn decode_slice(src: Source<'_>, h: &SliceHeader, out: &mut [f32]) ->
             ),
         )
     };
+    if JPEG_2000.contains(&h.transfer_syntax.as_str()) {
+        return decode_jpeg2000(&obj, name, h, out);
+    }
     // Native (unencapsulated) pixel data is used in place: decode_pixel_data would copy it.
     let native;
     let decoded;
@@ -100,6 +113,54 @@ pub(crate) fn decode_slice(src: Source<'_>, h: &SliceHeader, out: &mut [f32]) ->
         for (o, &b) in out.iter_mut().zip(bytes.iter()) {
             *o = value(b as u32);
         }
+    }
+    Ok(())
+}
+
+/// Decode a JPEG 2000 slice with our own adapter (see [`j2k`]) and rescale it to HU.
+fn decode_jpeg2000(
+    obj: &dicom_object::DefaultDicomObject,
+    name: &std::path::Path,
+    h: &SliceHeader,
+    out: &mut [f32],
+) -> Result<()> {
+    let element = obj
+        .get(tags::PIXEL_DATA)
+        .ok_or_else(|| Error::invalid(name, "missing PixelData"))?;
+    let fragments = element.value().fragments().unwrap_or(&[]);
+    if fragments.is_empty() {
+        return Err(Error::invalid(
+            name,
+            "JPEG 2000 pixel data holds no fragments (is it encapsulated?)",
+        ));
+    }
+    // A single-frame image may split its codestream over several fragments (PS3.5 A.4).
+    let joined;
+    let cs: &[u8] = if let [one] = fragments {
+        one
+    } else {
+        joined = fragments.concat();
+        &joined
+    };
+    let want = j2k::Expected {
+        cols: h.cols,
+        rows: h.rows,
+        bits_allocated: h.bits_allocated,
+        signed: h.signed,
+    };
+    let mut stored = vec![0i32; out.len()];
+    j2k::decode_frame(cs, want, &mut stored).map_err(|m| {
+        Error::invalid(
+            name,
+            format!(
+                "cannot decode pixel data in transfer syntax {}: {m}",
+                describe_syntax(&h.transfer_syntax)
+            ),
+        )
+    })?;
+    let (slope, intercept) = (h.slope, h.intercept);
+    for (o, &v) in out.iter_mut().zip(&stored) {
+        *o = (v as f64 * slope + intercept) as f32;
     }
     Ok(())
 }

@@ -12,7 +12,7 @@
 use std::io::{BufReader, Cursor, Read};
 use std::path::Path;
 
-use flate2::read::DeflateDecoder;
+use flate2::{Decompress, FlushDecompress, Status};
 
 use crate::{Error, Result};
 
@@ -84,6 +84,42 @@ impl Skip for Cursor<&[u8]> {
 
 /// A stream that can only be read (an inflating decoder): skipping reads and drops.
 struct Stream<R>(R);
+
+/// A raw-deflate reader that hands out every byte inflated before a corrupt spot, then ends,
+/// so that the scan sees at least as much of a damaged stream as any parser can.
+struct Inflate<'a> {
+    d: Decompress,
+    input: &'a [u8],
+    done: bool,
+}
+
+impl<'a> Inflate<'a> {
+    fn new(input: &'a [u8]) -> Self {
+        Inflate {
+            d: Decompress::new(false),
+            input,
+            done: false,
+        }
+    }
+}
+
+impl Read for Inflate<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        while !self.done && !buf.is_empty() {
+            let (in0, out0) = (self.d.total_in(), self.d.total_out());
+            let status = self.d.decompress(self.input, buf, FlushDecompress::None);
+            let used = (self.d.total_in() - in0) as usize;
+            let made = (self.d.total_out() - out0) as usize;
+            self.input = &self.input[used..];
+            // total_out counts what was written before an error too.
+            self.done = !matches!(status, Ok(Status::Ok | Status::BufError)) || used + made == 0;
+            if made > 0 {
+                return Ok(made);
+            }
+        }
+        Ok(0)
+    }
+}
 
 impl<R: Read> Read for Stream<R> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
@@ -275,15 +311,16 @@ impl<R: Skip> Walker<'_, R> {
             .take(rest)
             .read_to_end(&mut compressed)
             .map_err(|_| Stop::Leave)?;
-        // On a corrupt stream, count what inflated: the parser sees the same bytes first.
-        let mut counter = Stream(DeflateDecoder::new(&compressed[..]));
+        // On a corrupt stream, count every byte inflated before the error: a parser reading in
+        // small pieces sees them all (flate2's reader drops a whole read's output on error).
+        let mut counter = Inflate::new(&compressed);
         let mut len = 0u64;
         let mut buf = [0u8; 8192];
         while let Ok(n @ 1..) = counter.read(&mut buf) {
             len += n as u64;
         }
         let mut inner = Walker {
-            r: Stream(DeflateDecoder::new(&compressed[..])),
+            r: Stream(Inflate::new(&compressed)),
             pending: None,
             pos: 0,
             len,
@@ -298,6 +335,18 @@ impl<R: Skip> Walker<'_, R> {
         while self.pos < end.min(self.len) {
             let h = self.header(enc)?;
             if h.tag == ITEM_END || h.tag == SEQ_END {
+                // dicom-parser reads a stray delimiter's declared length as a value (zero-filling
+                // it first), while this walk would not skip it: both must see length 0.
+                if h.len != 0 {
+                    let (g, e) = h.tag;
+                    return Err(Stop::Bad(Error::invalid(
+                        self.name,
+                        format!(
+                            "corrupt DICOM element ({g:04X},{e:04X}) at byte {}: a delimitation item declares {} bytes instead of 0",
+                            self.pos, h.len
+                        ),
+                    )));
+                }
                 if delimited {
                     return Ok(());
                 }

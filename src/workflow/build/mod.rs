@@ -50,6 +50,13 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     let mut timings = BuildTimings::default();
     let mut warnings = Vec::new();
     let mut scene = BuildScene::prepare(case_dir, opts, &mut timings)?;
+    let non_finite = scene.segmentation.non_finite_voxels;
+    if non_finite > 0 {
+        warnings.push(format!(
+            "{}: {non_finite} CT voxels are not finite numbers (NaN or infinite); they were counted as tissue",
+            scene.case.ct_source.path().display()
+        ));
+    }
     let (pass, samples) = timed(&mut timings.fit, || fit_pass::fit_pass(&mut scene, opts))?;
     let light = timed(&mut timings.calibrated_fit, || {
         light::calibrated_light(&scene, samples, opts, &mut warnings)
