@@ -120,7 +120,7 @@ fn signed_distance(comp: &Volume<u8>, dt_in: &[f32]) -> Result<Volume<f32>> {
             }
         })
         .collect();
-    Ok(Volume::from_data(comp.dims, comp.affine, sdf_data)?)
+    Volume::from_data(comp.dims, comp.affine, sdf_data)
 }
 
 /// World position (mm) of the centre of voxel `i` (linear index).
