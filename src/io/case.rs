@@ -209,80 +209,107 @@ fn locate_frames(
     poses: &[PoseEntry],
     camera: &Camera,
 ) -> Result<FramesLocation> {
-    let frames_dir = dir.join("frames");
+    let uses_video = poses
+        .iter()
+        .any(|p| matches!(p.frame, FrameRef::VideoIndex(_)));
+    if uses_video {
+        locate_video(dir, poses_path, poses, camera)
+    } else {
+        locate_pngs(dir, poses_path, poses, camera)
+    }
+}
+
+/// "fewer poses than frames" or "more poses than frames", for a count mismatch.
+fn fewer_or_more(poses: usize, frames: usize) -> &'static str {
+    if poses < frames {
+        "fewer poses than frames"
+    } else {
+        "more poses than frames"
+    }
+}
+
+/// The one `video.<ext>` of the case: its frame size must be the camera's, and the poses must
+/// refer to each of its frames exactly once.
+fn locate_video(
+    dir: &Path,
+    poses_path: &Path,
+    poses: &[PoseEntry],
+    camera: &Camera,
+) -> Result<FramesLocation> {
     let videos: Vec<PathBuf> = VIDEO_EXTENSIONS
         .iter()
         .map(|e| dir.join(format!("video.{e}")))
         .filter(|p| p.is_file())
         .collect();
-    let uses_video = poses
-        .iter()
-        .any(|p| matches!(p.frame, FrameRef::VideoIndex(_)));
-    if uses_video {
-        let path = match videos.as_slice() {
-            [one] => one.clone(),
-            [] => {
-                return Err(Error::missing(
-                    dir.join("video.mp4"),
-                    "poses.json refers to video frames (\"frame\") but there is no video file",
-                ))
-            }
-            _ => {
-                return Err(Error::invalid(
-                    dir,
-                    format!(
-                        "more than one video file ({}): keep exactly one",
-                        videos.len()
-                    ),
-                ))
-            }
-        };
-        let reader = VideoReader::open(&path)?;
-        check_frame_size(&path, reader.width(), reader.height(), camera)?;
-        let count = reader.frame_count();
-        drop(reader);
-        let mut seen = HashSet::new();
-        for (n, p) in poses.iter().enumerate() {
-            if let FrameRef::VideoIndex(i) = p.frame {
-                if i >= count {
-                    return Err(Error::invalid(
-                        poses_path,
-                        format!(
-                            "pose {n} refers to frame {i}, but {} has {count} frames",
-                            path.display()
-                        ),
-                    ));
-                }
-                if !seen.insert(i) {
-                    return Err(Error::invalid(
-                        poses_path,
-                        format!("pose {n}: frame {i} is listed twice"),
-                    ));
-                }
-            }
+    let path = match videos.as_slice() {
+        [one] => one.clone(),
+        [] => {
+            return Err(Error::missing(
+                dir.join("video.mp4"),
+                "poses.json refers to video frames (\"frame\") but there is no video file",
+            ))
         }
-        if poses.len() != count {
+        _ => {
             return Err(Error::invalid(
-                poses_path,
+                dir,
                 format!(
-                    "{} poses for {count} video frames: {}",
-                    poses.len(),
-                    if poses.len() < count {
-                        "fewer poses than frames"
-                    } else {
-                        "more poses than frames"
-                    }
+                    "more than one video file ({}): keep exactly one",
+                    videos.len()
                 ),
-            ));
+            ))
         }
-        return Ok(FramesLocation::Video { path, count });
+    };
+    let reader = VideoReader::open(&path)?;
+    check_frame_size(&path, reader.width(), reader.height(), camera)?;
+    let count = reader.frame_count();
+    drop(reader);
+    let mut seen = HashSet::new();
+    for (n, p) in poses.iter().enumerate() {
+        if let FrameRef::VideoIndex(i) = p.frame {
+            if i >= count {
+                return Err(Error::invalid(
+                    poses_path,
+                    format!(
+                        "pose {n} refers to frame {i}, but {} has {count} frames",
+                        path.display()
+                    ),
+                ));
+            }
+            if !seen.insert(i) {
+                return Err(Error::invalid(
+                    poses_path,
+                    format!("pose {n}: frame {i} is listed twice"),
+                ));
+            }
+        }
     }
-    // PNG frames.
+    if poses.len() != count {
+        return Err(Error::invalid(
+            poses_path,
+            format!(
+                "{} poses for {count} video frames: {}",
+                poses.len(),
+                fewer_or_more(poses.len(), count)
+            ),
+        ));
+    }
+    Ok(FramesLocation::Video { path, count })
+}
+
+/// The PNG files named in the poses: each present and listed once, as many as frames/ holds
+/// (when the case has one), each of the camera's size (read from its header).
+fn locate_pngs(
+    dir: &Path,
+    poses_path: &Path,
+    poses: &[PoseEntry],
+    camera: &Camera,
+) -> Result<FramesLocation> {
+    let frames_dir = dir.join("frames");
     let files: Vec<PathBuf> = poses
         .iter()
         .map(|p| match &p.frame {
             FrameRef::Image(f) => f.clone(),
-            FrameRef::VideoIndex(_) => unreachable!("checked above"),
+            FrameRef::VideoIndex(_) => unreachable!("the caller sends video cases elsewhere"),
         })
         .collect();
     let mut seen = HashSet::new();
@@ -317,11 +344,7 @@ fn locate_frames(
                     "{} poses for {on_disk} PNG frames in {}: {}",
                     files.len(),
                     frames_dir.display(),
-                    if files.len() < on_disk {
-                        "fewer poses than frames"
-                    } else {
-                        "more poses than frames"
-                    }
+                    fewer_or_more(files.len(), on_disk)
                 ),
             ));
         }

@@ -14,30 +14,29 @@ use super::ct_volume::{make_ct_phantom, CtPhantomOptions};
 use super::from_mask::{ct_from_mask_file, FromMaskOptions};
 use super::mask_path::mask_centreline;
 use super::overlay::ScopeOverlay;
-use super::path::{camera_path, novel_views, tree_centreline, PathOptions, SmoothPath};
 use super::pose_noise::{tracker_poses, PoseNoise};
+use super::path::{camera_path, novel_views, tree_centreline, PathOptions, SmoothPath};
 use super::render::{auto_gain, expose, render_radiance, LightModel, SensorModel, SubpixelRays};
-use super::truth_io::{write_albedo_ply, write_gray16_png, write_gray8_png, write_linear16_png};
 use super::truth_mesh::{mask_truth_mesh, tree_truth_mesh};
 use crate::camera::Camera;
 use crate::camera::Pose;
 use crate::image::Frame;
-use crate::io::atomic::write_json_atomic;
 use crate::io::camera_file::write_camera_json;
 use crate::io::image_mask::MASK_FILE;
-use crate::io::mesh_export::write_ply;
 use crate::io::nifti::write_nifti;
 use crate::io::png::write_png_srgb8;
 use crate::io::poses::{write_poses, FrameRef, PoseEntry};
 use crate::math::{Affine, Point3};
 use crate::mesh::TriMesh;
-use crate::raycast::{cast_frame, Scene};
+use crate::raycast::Scene;
 use crate::volume::Volume;
 use crate::{Error, Result};
-use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+mod truth;
+use truth::{write_manifest, write_truth};
 
 /// Options of [`write_phantom_case`].
 #[derive(Clone, Debug)]
@@ -71,13 +70,13 @@ pub struct PhantomOptions {
     pub sensor: SensorModel,
     /// Camera path (its `frames` and `seed` are overwritten).
     pub path: PathOptions,
-    /// Replace an existing `out` folder.
     /// Burn a scope's overlay into the frames (black border around an octagonal field of
     /// view, on-screen text over the image) and write the matching CASE/mask.png.
     pub scope_overlay: bool,
     /// Tracker-like error of the poses written to poses.json (the true ones go to
     /// truth/poses.json either way); zero by default.
     pub pose_noise: PoseNoise,
+    /// Replace an existing `out` folder.
     pub force: bool,
 }
 
@@ -154,16 +153,6 @@ struct FrameGain {
     saturated_fraction: f64,
 }
 
-#[derive(Serialize)]
-struct GainsFile<'a> {
-    description: &'static str,
-    light: &'a LightModel,
-    cone_exponent: f64,
-    sensor: &'a SensorModel,
-    reference_gain: f64,
-    frames: Vec<FrameGain>,
-}
-
 /// The mucosa albedo of the phantom case made with master seed `seed` (`truth.json` "seed").
 pub fn phantom_albedo(seed: u64) -> MucosaAlbedo {
     MucosaAlbedo::new(seed.wrapping_mul(17).wrapping_add(5))
@@ -208,47 +197,28 @@ pub fn write_phantom_case(out: &Path, opts: &PhantomOptions) -> Result<PhantomSu
 /// Signed distance (mm) to the true lumen wall, negative inside.
 type SdfFn = Box<dyn Fn(&Point3<f64>) -> f64 + Sync>;
 
+/// The airway of the case: its CT, the true lumen mesh, the signed distance the camera path
+/// is checked against and the centreline it follows.
+struct Anatomy {
+    ct: Volume<f32>,
+    mesh: TriMesh,
+    sdf: SdfFn,
+    centreline: Vec<Point3<f64>>,
+}
+
+/// What the frames and the truth views are rendered from.
+struct Stage<'a> {
+    opts: &'a PhantomOptions,
+    scene: Scene,
+    albedo: MucosaAlbedo,
+}
+
 fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     let mut sm = PhantomSummary::default();
     let seed = opts.seed;
-    let t = Instant::now();
-    // The CT, the truth mesh and the signed distance the path is checked with.
-    let (ct, mesh, sdf_fn, centreline): (Volume<f32>, TriMesh, SdfFn, Vec<Point3<f64>>) =
-        match &opts.anatomy {
-            None => {
-                let mut co = opts.ct.clone();
-                co.tree.seed = seed;
-                co.seed = seed.wrapping_mul(31).wrapping_add(7);
-                let ph = make_ct_phantom(&co)?;
-                sm.seconds[0] = t.elapsed().as_secs_f64();
-                let t1 = Instant::now();
-                let top = ph.tree.branches[0].control[0].z - 5.0;
-                let mesh = tree_truth_mesh(&ph.tree, opts.truth_grid_mm, top, opts.max_triangles)?;
-                sm.seconds[1] = t1.elapsed().as_secs_f64();
-                let line = tree_centreline(&ph.tree);
-                let tree = ph.tree;
-                (ph.ct, mesh, Box::new(move |p| tree.lumen_sdf(*p)), line)
-            }
-            Some(mask_path) => {
-                let mut mo = opts.mask.clone();
-                mo.seed = seed.wrapping_mul(31).wrapping_add(11);
-                let ph = ct_from_mask_file(mask_path, &mo)?;
-                sm.seconds[0] = t.elapsed().as_secs_f64();
-                let t1 = Instant::now();
-                let mesh = mask_truth_mesh(&ph.truth_mask, opts.max_triangles)?;
-                sm.seconds[1] = t1.elapsed().as_secs_f64();
-                let cl = mask_centreline(&ph.truth_mask)
-                    .map_err(|e| Error::invalid(mask_path, e.to_string()))?;
-                let sdf: Volume<f32> = cl.sdf;
-                (
-                    ph.ct,
-                    mesh,
-                    Box::new(move |p| sdf.sample_world(*p).map_or(1.0, |v| v as f64)),
-                    cl.points,
-                )
-            }
-        };
-    sm.ct_dims = ct.dims;
+    let anatomy = make_anatomy(opts, &mut sm)?;
+    let mesh = &anatomy.mesh;
+    sm.ct_dims = anatomy.ct.dims;
     sm.mesh_vertices = mesh.positions.len();
     sm.mesh_triangles = mesh.triangles.len();
 
@@ -256,29 +226,107 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     let mut po = opts.path.clone();
     po.frames = opts.frames;
     po.seed = seed.wrapping_mul(131).wrapping_add(3);
-    let path = SmoothPath::new(&centreline, 0.5, po.smoothing_mm)?;
-    let poses = camera_path(&path, &*sdf_fn, &po)?;
-    let views = novel_views(&path, &*sdf_fn, opts.novel_views, &po)?;
+    let path = SmoothPath::new(&anatomy.centreline, 0.5, po.smoothing_mm)?;
+    let poses = camera_path(&path, &*anatomy.sdf, &po)?;
+    let views = novel_views(&path, &*anatomy.sdf, opts.novel_views, &po)?;
     sm.seconds[2] = t.elapsed().as_secs_f64();
 
-    // Frames.
     let t = Instant::now();
-    let scene = Scene::new(&mesh)?;
-    let albedo = phantom_albedo(seed);
+    let stage = Stage {
+        opts,
+        scene: Scene::new(mesh)?,
+        albedo: phantom_albedo(seed),
+    };
     let camera = phantom_camera(opts.width, opts.height);
-    let rays = SubpixelRays::new(&camera, opts.supersample);
+    let gains = write_frames(dir, &stage, &camera, &poses, &mut sm)?;
+    sm.seconds[3] = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let truth = dir.join("truth");
+    sm.views = write_truth(&truth, &stage, mesh, &camera, &views, gains)?;
+    sm.seconds[4] = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    // Real CT is stored as 16-bit integers.
+    let hu = anatomy
+        .ct
+        .map(|v| v.round().clamp(-32768.0, 32767.0) as i16);
+    write_nifti(&dir.join("ct.nii.gz"), &hu)?;
+    sm.seconds[5] = t.elapsed().as_secs_f64();
+    write_manifest(&truth, opts, &sm)?;
+    Ok(sm)
+}
+
+/// The CT, the truth mesh, the signed distance and the centreline: from the built-in tree, or
+/// from the mask `opts.anatomy`. Their seconds go to `sm.seconds[0]` (CT) and `[1]` (mesh).
+fn make_anatomy(opts: &PhantomOptions, sm: &mut PhantomSummary) -> Result<Anatomy> {
+    let seed = opts.seed;
+    let t = Instant::now();
+    match &opts.anatomy {
+        None => {
+            let mut co = opts.ct.clone();
+            co.tree.seed = seed;
+            co.seed = seed.wrapping_mul(31).wrapping_add(7);
+            let ph = make_ct_phantom(&co)?;
+            sm.seconds[0] = t.elapsed().as_secs_f64();
+            let t1 = Instant::now();
+            let top = ph.tree.branches[0].control[0].z - 5.0;
+            let mesh = tree_truth_mesh(&ph.tree, opts.truth_grid_mm, top, opts.max_triangles)?;
+            sm.seconds[1] = t1.elapsed().as_secs_f64();
+            let centreline = tree_centreline(&ph.tree);
+            let tree = ph.tree;
+            Ok(Anatomy {
+                ct: ph.ct,
+                mesh,
+                sdf: Box::new(move |p| tree.lumen_sdf(*p)),
+                centreline,
+            })
+        }
+        Some(mask_path) => {
+            let mut mo = opts.mask.clone();
+            mo.seed = seed.wrapping_mul(31).wrapping_add(11);
+            let ph = ct_from_mask_file(mask_path, &mo)?;
+            sm.seconds[0] = t.elapsed().as_secs_f64();
+            let t1 = Instant::now();
+            let mesh = mask_truth_mesh(&ph.truth_mask, opts.max_triangles)?;
+            sm.seconds[1] = t1.elapsed().as_secs_f64();
+            let cl = mask_centreline(&ph.truth_mask)
+                .map_err(|e| Error::invalid(mask_path, e.to_string()))?;
+            let sdf: Volume<f32> = cl.sdf;
+            Ok(Anatomy {
+                ct: ph.ct,
+                mesh,
+                sdf: Box::new(move |p| sdf.sample_world(*p).map_or(1.0, |v| v as f64)),
+                centreline: cl.points,
+            })
+        }
+    }
+}
+
+/// Render, expose (auto gain, sensor noise, the scope's overlay if asked) and write a frame
+/// per pose, then poses.json, camera.json and mask.png (with the overlay). Records each
+/// frame's statistics in `sm` and returns each frame's gain.
+fn write_frames(
+    dir: &Path,
+    stage: &Stage,
+    camera: &Camera,
+    poses: &[Affine],
+    sm: &mut PhantomSummary,
+) -> Result<Vec<FrameGain>> {
+    let opts = stage.opts;
+    let rays = SubpixelRays::new(camera, opts.supersample);
     let frames_dir = dir.join("frames");
     std::fs::create_dir_all(&frames_dir).map_err(|e| Error::io(&frames_dir, e))?;
     let mut entries = Vec::with_capacity(poses.len());
     let mut true_entries = Vec::with_capacity(poses.len());
     // What a tracker would report (the frames are rendered from the true poses).
     let reported = tracker_poses(
-        &poses,
+        poses,
         &opts.pose_noise,
-        seed.wrapping_mul(613).wrapping_add(29),
+        opts.seed.wrapping_mul(613).wrapping_add(29),
     );
     let mut gains = Vec::with_capacity(poses.len());
-    let noise_seed = seed.wrapping_mul(7919).wrapping_add(1);
+    let noise_seed = opts.seed.wrapping_mul(7919).wrapping_add(1);
     let overlay = opts
         .scope_overlay
         .then(|| ScopeOverlay::new(opts.width, opts.height));
@@ -286,7 +334,7 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
         write_png_srgb8(&dir.join(MASK_FILE), &o.mask())?;
     }
     for (i, pose) in poses.iter().enumerate() {
-        let rad = render_radiance(&scene, &rays, pose, &albedo, &opts.light);
+        let rad = render_radiance(&stage.scene, &rays, pose, &stage.albedo, &opts.light);
         let gain = auto_gain(&rad.frame, &opts.sensor);
         let mut img = expose(&rad.frame, gain, &opts.sensor, true, noise_seed, i as u64);
         if let Some(o) = &overlay {
@@ -313,137 +361,12 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
         });
     }
     write_poses(&dir.join("poses.json"), &entries, dir)?;
-    write_camera_json(&dir.join("camera.json"), &camera)?;
-    sm.frames = entries.len();
-    sm.seconds[3] = t.elapsed().as_secs_f64();
-
-    // Truth.
-    let t = Instant::now();
     let truth = dir.join("truth");
-    let vdir = truth.join("views");
-    std::fs::create_dir_all(&vdir).map_err(|e| Error::io(&vdir, e))?;
-    write_ply(&truth.join("lumen.ply"), &mesh)?;
+    std::fs::create_dir_all(&truth).map_err(|e| Error::io(&truth, e))?;
     write_poses(&truth.join("poses.json"), &true_entries, dir)?;
-    let vertex_albedo: Vec<[f32; 3]> = mesh
-        .positions
-        .par_iter()
-        .map(|p| albedo.eval(Point3::new(p.x as f64, p.y as f64, p.z as f64)))
-        .collect();
-    write_albedo_ply(&truth.join("albedo_vertices.ply"), &mesh, &vertex_albedo)?;
-    let reference_gain = gains[0].gain;
-    let gfile = GainsFile {
-        description:
-            "linear frame = clip(gain * radiance + noise); radiance per render.rs with the \
-                      light below; truth views use reference_gain (frame 0) and no noise",
-        light: &opts.light,
-        cone_exponent: opts.light.cone_exponent(),
-        sensor: &opts.sensor,
-        reference_gain,
-        frames: gains,
-    };
-    write_json_atomic(&truth.join("gains.json"), &gfile)?;
-    let pinhole = camera.pinhole();
-    write_camera_json(&truth.join("camera.json"), &pinhole)?;
-    let vrays = SubpixelRays::new(&pinhole, opts.supersample);
-    let mut ventries = Vec::new();
-    for (k, v) in views.iter().enumerate() {
-        write_view(
-            &truth,
-            k,
-            v,
-            &scene,
-            &pinhole,
-            &vrays,
-            &albedo,
-            opts,
-            reference_gain,
-        )?;
-        ventries.push(PoseEntry {
-            frame: FrameRef::Image(vdir.join(format!("{k:06}.png"))),
-            pose: Pose::new(*v),
-        });
-    }
-    write_poses(&truth.join("views.json"), &ventries, &truth)?;
-    sm.views = ventries.len();
-    sm.seconds[4] = t.elapsed().as_secs_f64();
-
-    let t = Instant::now();
-    // Real CT is stored as 16-bit integers.
-    let hu = ct.map(|v| v.round().clamp(-32768.0, 32767.0) as i16);
-    write_nifti(&dir.join("ct.nii.gz"), &hu)?;
-    sm.seconds[5] = t.elapsed().as_secs_f64();
-    let manifest = serde_json::json!({
-        "generator": "bronchosim phantom",
-        "seed": seed,
-        "anatomy": opts.anatomy.as_ref().map(|p| p.display().to_string()),
-        "frames": sm.frames,
-        "size": [opts.width, opts.height],
-        "supersample": opts.supersample,
-        "truth_grid_mm": opts.truth_grid_mm,
-        "pose_noise": &opts.pose_noise,
-        "files": {
-            "lumen.ply": "true lumen mesh, world mm (RAS+), normals into the lumen",
-            "albedo_vertices.ply": "the same mesh with float red, green, blue: linear albedo per vertex",
-            "gains.json": "per-frame auto-gain, light and sensor model",
-            "poses.json": "the true pose of every frame, images relative to the case folder (the case's poses.json has pose_noise added)",
-            "views.json": "novel view poses (camera_to_world), images relative to truth/",
-            "camera.json": "pinhole camera of the views (no distortion)",
-            "views/NNNNNN.png": "sRGB 8-bit, clean (no noise), reference gain",
-            "views/NNNNNN_linear.png": "linear 16-bit RGB: value = code / 65535",
-            "views/NNNNNN_mask.png": "8-bit: 255 where the pixel-centre ray hits the mesh",
-            "views/NNNNNN_depth.png": "16-bit: distance camera centre to surface along the pixel-centre ray, code / 100 mm (0 = miss)",
-            "views/NNNNNN_albedo.png": "linear 16-bit RGB albedo at the pixel-centre hit"
-        },
-        "mesh": { "vertices": sm.mesh_vertices, "triangles": sm.mesh_triangles },
-    });
-    write_json_atomic(&truth.join("truth.json"), &manifest)?;
-    Ok(sm)
-}
-
-/// Render one truth view: clean image at the reference gain and pixel-centre buffers.
-#[allow(clippy::too_many_arguments)]
-fn write_view(
-    truth: &Path,
-    k: usize,
-    pose: &Affine,
-    scene: &Scene,
-    pinhole: &Camera,
-    rays: &SubpixelRays,
-    albedo: &MucosaAlbedo,
-    opts: &PhantomOptions,
-    gain: f64,
-) -> Result<()> {
-    let rad = render_radiance(scene, rays, pose, albedo, &opts.light);
-    let img = expose(&rad.frame, gain, &opts.sensor, false, 0, 0);
-    let base = truth.join("views");
-    write_png_srgb8(&base.join(format!("{k:06}.png")), &img)?;
-    write_linear16_png(&base.join(format!("{k:06}_linear.png")), &img)?;
-    let gb = cast_frame(scene, pinhole, pose);
-    let (w, h) = (pinhole.width, pinhole.height);
-    let mask: Vec<u8> = (0..gb.tri.len())
-        .map(|i| if gb.hit(i) { 255 } else { 0 })
-        .collect();
-    let depth: Vec<u16> =
-        gb.z.iter()
-            .map(|&z| {
-                if z.is_finite() {
-                    (z as f64 * 100.0).round().clamp(1.0, 65535.0) as u16
-                } else {
-                    0
-                }
-            })
-            .collect();
-    let mut alb = Frame::new(w, h);
-    for i in 0..gb.tri.len() {
-        if gb.hit(i) {
-            let p = gb.point[i];
-            let a = albedo.eval(Point3::new(p[0] as f64, p[1] as f64, p[2] as f64));
-            alb.rgb[3 * i..3 * i + 3].copy_from_slice(&a);
-        }
-    }
-    write_gray8_png(&base.join(format!("{k:06}_mask.png")), w, h, &mask)?;
-    write_gray16_png(&base.join(format!("{k:06}_depth.png")), w, h, &depth)?;
-    write_linear16_png(&base.join(format!("{k:06}_albedo.png")), &alb)
+    write_camera_json(&dir.join("camera.json"), camera)?;
+    sm.frames = entries.len();
+    Ok(gains)
 }
 
 /// Mean linear luminance and the fraction of pixels with a channel at 1.0.

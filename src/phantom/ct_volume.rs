@@ -129,6 +129,10 @@ impl Texture {
 }
 
 /// Voxelise the airway tree into a CT volume with its truth mask and volume.
+///
+/// Steps: check the options, lay the grid out around the tree ([`lay_out_grid`]), fill every
+/// axial slice in parallel ([`Voxeliser::fill_slice`]), then sum the lumen fractions into the
+/// truth volume and threshold them at one half into the truth mask.
 pub fn make_ct_phantom(opts: &CtPhantomOptions) -> Result<CtPhantom> {
     let sp = opts.spacing_mm;
     if !sp.iter().all(|s| s.is_finite() && *s > 0.0) || opts.supersample == 0 {
@@ -141,6 +145,45 @@ pub fn make_ct_phantom(opts: &CtPhantomOptions) -> Result<CtPhantom> {
         });
     }
     let tree = AirwayTree::new(&opts.tree);
+    let grid = lay_out_grid(opts, &tree)?;
+    let [nx, ny, nz] = grid.dims;
+    let voxeliser = Voxeliser::new(opts, &tree, &grid);
+    let mut ct = vec![0f32; nx * ny * nz];
+    let mut frac = vec![0f32; nx * ny * nz];
+    let slice = nx * ny;
+    ct.par_chunks_mut(slice)
+        .zip(frac.par_chunks_mut(slice))
+        .enumerate()
+        .for_each(|(k, (cts, frs))| voxeliser.fill_slice(k, cts, frs));
+    let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
+    let truth_volume_ml = frac.par_iter().map(|&f| f as f64).sum::<f64>() * voxel_ml;
+    let truth = frac.par_iter().map(|&f| u8::from(f >= 0.5)).collect();
+    Ok(CtPhantom {
+        ct: Volume::from_data(grid.dims, grid.affine, ct)?,
+        truth_mask: Volume::from_data(grid.dims, grid.affine, truth)?,
+        truth_volume_ml,
+        tree,
+        body_centre_mm: grid.centre,
+        body_semi_axes_mm: grid.semi,
+    })
+}
+
+/// The phantom's grid and the body outline in it.
+struct Grid {
+    /// Voxels along i, j, k.
+    dims: [usize; 3],
+    /// Index to world (mm), LPS-like: i runs to the patient's left (-x), j posterior (-y).
+    affine: Affine,
+    /// Centre of the body ellipse (world x, y mm).
+    centre: [f64; 2],
+    /// Semi-axes of the body ellipse along world x and y (mm).
+    semi: [f64; 2],
+}
+
+/// Fit the body outline around the tree (lungs 15 mm beyond it, then the chest wall) and the
+/// grid around the body (6 mm of outside air), unless `opts.dims` fixes the grid.
+fn lay_out_grid(opts: &CtPhantomOptions, tree: &AirwayTree) -> Result<Grid> {
+    let sp = opts.spacing_mm;
     let (lo, hi) = tree.bounds();
     let centre = [(lo.x + hi.x) / 2.0, (lo.y + hi.y) / 2.0];
     let lung_margin = 15.0;
@@ -188,133 +231,181 @@ pub fn make_ct_phantom(opts: &CtPhantomOptions) -> Result<CtPhantom> {
     } else {
         bottom
     };
+    Ok(Grid {
+        dims,
+        affine,
+        centre,
+        semi,
+    })
+}
 
-    let [nx, ny, nz] = dims;
-    let texture = Texture::new(opts.seed);
-    let wall = opts.wall_thickness_mm;
-    let mean_sp = (sp[0] + sp[1] + sp[2]) / 3.0;
-    let half_diag = 0.5 * (sp[0] * sp[0] + sp[1] * sp[1] + sp[2] * sp[2]).sqrt();
-    let ss = opts.supersample;
-    let sub_w = mean_sp / ss as f64;
-    let trachea = &tree.branches[0];
-    let carina_z = tree.carina().z;
-    let tile = 16usize;
-    let mut ct = vec![0f32; nx * ny * nz];
-    let mut frac = vec![0f32; nx * ny * nz];
-    let slice = nx * ny;
-    ct.par_chunks_mut(slice)
-        .zip(frac.par_chunks_mut(slice))
-        .enumerate()
-        .for_each(|(k, (cts, frs))| {
-            let mut rng = Pcg32::new(opts.seed, k as u64 + 1);
-            let w = |i: f64, j: f64, kk: f64| {
-                Point3::new(
-                    affine[(0, 0)] * i + affine[(0, 3)],
-                    affine[(1, 1)] * j + affine[(1, 3)],
-                    affine[(2, 2)] * kk + affine[(2, 3)],
-                )
-            };
-            let z = w(0.0, 0.0, k as f64).z;
-            // Mediastinum: soft tissue around the trachea's axis above the carina.
-            let tr_xy = {
-                let c = &trachea.centreline;
-                let mut best = c[0];
-                for p in c {
-                    if (p.z - z).abs() < (best.z - z).abs() {
-                        best = *p;
-                    }
-                }
-                best
-            };
-            for tj in (0..ny).step_by(tile) {
-                for ti in (0..nx).step_by(tile) {
-                    let (i1, j1) = ((ti + tile).min(nx), (tj + tile).min(ny));
-                    let a = w(ti as f64, tj as f64, k as f64);
-                    let b = w((i1 - 1) as f64, (j1 - 1) as f64, k as f64);
-                    let tlo = Point3::new(a.x.min(b.x), a.y.min(b.y), z - sp[2]);
-                    let thi = Point3::new(a.x.max(b.x), a.y.max(b.y), z + sp[2]);
-                    let cands = tree.branches_near(
-                        &tlo,
-                        &thi,
-                        wall + 2.0 * half_diag + tree.junction_smoothing_mm,
-                    );
-                    for j in tj..j1 {
-                        for i in ti..i1 {
-                            let p = w(i as f64, j as f64, k as f64);
-                            let qx = (p.x - centre[0]) / semi[0];
-                            let qy = (p.y - centre[1]) / semi[1];
-                            let ia = semi[0] - opts.chest_wall_mm;
-                            let ib = semi[1] - opts.chest_wall_mm;
-                            let bg = if qx * qx + qy * qy > 1.0 {
-                                opts.hu_air
-                            } else if ((p.x - centre[0]) / ia).powi(2)
-                                + ((p.y - centre[1]) / ib).powi(2)
-                                > 1.0
-                                || (z > carina_z - 10.0
-                                    && ((p.x - tr_xy.x).powi(2) + (p.y - tr_xy.y).powi(2)).sqrt()
-                                        < trachea.radius_start_mm + 12.0)
-                            {
-                                // Chest wall, or mediastinum around the trachea.
-                                opts.hu_tissue
-                            } else {
-                                opts.hu_lung + opts.lung_texture_hu * texture.at(&p) as f32
-                            };
-                            let mut hu = bg;
-                            let mut fl = 0.0;
-                            if !cands.is_empty() {
-                                let d = tree.sdf_among(&p, cands.iter().copied());
-                                if d < wall + half_diag + mean_sp {
-                                    fl = if d.abs() < half_diag + sub_w {
-                                        let mut acc = 0.0;
-                                        for c in 0..ss {
-                                            for bb in 0..ss {
-                                                for aa in 0..ss {
-                                                    let o = |u: usize| {
-                                                        (u as f64 + 0.5) / ss as f64 - 0.5
-                                                    };
-                                                    let q = w(
-                                                        i as f64 + o(aa),
-                                                        j as f64 + o(bb),
-                                                        k as f64 + o(c),
-                                                    );
-                                                    let dq =
-                                                        tree.sdf_among(&q, cands.iter().copied());
-                                                    acc += (0.5 - dq / sub_w).clamp(0.0, 1.0);
-                                                }
-                                            }
-                                        }
-                                        acc / (ss * ss * ss) as f64
-                                    } else if d < 0.0 {
-                                        1.0
-                                    } else {
-                                        0.0
-                                    };
-                                    let fo = (0.5 - (d - wall) / mean_sp).clamp(0.0, 1.0).max(fl);
-                                    hu = (fl * opts.hu_air as f64
-                                        + (fo - fl) * opts.hu_tissue as f64
-                                        + (1.0 - fo) * bg as f64)
-                                        as f32;
-                                }
-                            }
-                            let n = i + nx * j;
-                            cts[n] = hu + opts.noise_sigma_hu * rng.normal() as f32;
-                            frs[n] = fl as f32;
-                        }
+/// Side of the square tiles (voxels) a slice is cut into: each tile looks up the branches
+/// near it once.
+const TILE: usize = 16;
+
+/// What every slice needs to voxelise the tree.
+struct Voxeliser<'a> {
+    opts: &'a CtPhantomOptions,
+    tree: &'a AirwayTree,
+    grid: &'a Grid,
+    texture: Texture,
+    /// Mean voxel size (mm): the width of the outer wall's partial-volume ramp.
+    mean_sp: f64,
+    /// Half the voxel diagonal (mm): a surface farther than this does not cut the voxel.
+    half_diag: f64,
+    /// Sub-sample width (mm): the width of the lumen's partial-volume ramp.
+    sub_w: f64,
+    /// Height of the carina (world z, mm): the mediastinum ends 10 mm below it.
+    carina_z: f64,
+}
+
+impl<'a> Voxeliser<'a> {
+    fn new(opts: &'a CtPhantomOptions, tree: &'a AirwayTree, grid: &'a Grid) -> Self {
+        let sp = opts.spacing_mm;
+        let mean_sp = (sp[0] + sp[1] + sp[2]) / 3.0;
+        Voxeliser {
+            opts,
+            tree,
+            grid,
+            texture: Texture::new(opts.seed),
+            mean_sp,
+            half_diag: 0.5 * (sp[0] * sp[0] + sp[1] * sp[1] + sp[2] * sp[2]).sqrt(),
+            sub_w: mean_sp / opts.supersample as f64,
+            carina_z: tree.carina().z,
+        }
+    }
+
+    /// World position (mm) of the fractional voxel index (i, j, k); the affine is diagonal.
+    #[inline]
+    fn world(&self, i: f64, j: f64, k: f64) -> Point3<f64> {
+        let a = &self.grid.affine;
+        Point3::new(
+            a[(0, 0)] * i + a[(0, 3)],
+            a[(1, 1)] * j + a[(1, 3)],
+            a[(2, 2)] * k + a[(2, 3)],
+        )
+    }
+
+    /// Fill slice `k` of the CT (`cts`, HU with noise) and of the lumen fraction (`frs`), tile
+    /// by tile; the noise of a slice has its own stream, so slices run in any order.
+    fn fill_slice(&self, k: usize, cts: &mut [f32], frs: &mut [f32]) {
+        let [nx, ny, _] = self.grid.dims;
+        let mut rng = Pcg32::new(self.opts.seed, k as u64 + 1);
+        let z = self.world(0.0, 0.0, k as f64).z;
+        let tr_xy = self.trachea_axis_at(z);
+        for tj in (0..ny).step_by(TILE) {
+            for ti in (0..nx).step_by(TILE) {
+                let (i1, j1) = ((ti + TILE).min(nx), (tj + TILE).min(ny));
+                let cands = self.branches_near_tile([ti, tj], [i1, j1], k, z);
+                for j in tj..j1 {
+                    for i in ti..i1 {
+                        let (hu, fl) = self.voxel([i, j, k], z, &tr_xy, &cands);
+                        let n = i + nx * j;
+                        cts[n] = hu + self.opts.noise_sigma_hu * rng.normal() as f32;
+                        frs[n] = fl as f32;
                     }
                 }
             }
-        });
-    let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
-    let truth_volume_ml = frac.par_iter().map(|&f| f as f64).sum::<f64>() * voxel_ml;
-    let truth = frac.par_iter().map(|&f| u8::from(f >= 0.5)).collect();
-    Ok(CtPhantom {
-        ct: Volume::from_data(dims, affine, ct)?,
-        truth_mask: Volume::from_data(dims, affine, truth)?,
-        truth_volume_ml,
-        tree,
-        body_centre_mm: centre,
-        body_semi_axes_mm: semi,
-    })
+        }
+    }
+
+    /// The trachea's centreline sample nearest in height to `z` (mm): the mediastinum's axis.
+    fn trachea_axis_at(&self, z: f64) -> Point3<f64> {
+        let c = &self.tree.branches[0].centreline;
+        let mut best = c[0];
+        for p in c {
+            if (p.z - z).abs() < (best.z - z).abs() {
+                best = *p;
+            }
+        }
+        best
+    }
+
+    /// Branches whose wall can reach the tile of voxels [i0, i1) x [j0, j1) in slice `k`.
+    fn branches_near_tile(&self, t0: [usize; 2], t1: [usize; 2], k: usize, z: f64) -> Vec<usize> {
+        let sp = self.opts.spacing_mm;
+        let a = self.world(t0[0] as f64, t0[1] as f64, k as f64);
+        let b = self.world((t1[0] - 1) as f64, (t1[1] - 1) as f64, k as f64);
+        let tlo = Point3::new(a.x.min(b.x), a.y.min(b.y), z - sp[2]);
+        let thi = Point3::new(a.x.max(b.x), a.y.max(b.y), z + sp[2]);
+        let margin = self.opts.wall_thickness_mm + 2.0 * self.half_diag;
+        self.tree
+            .branches_near(&tlo, &thi, margin + self.tree.junction_smoothing_mm)
+    }
+
+    /// HU (without noise) and lumen fraction of voxel (i, j, k): the background, then the
+    /// airway's lumen and wall over it with their partial volumes.
+    fn voxel(
+        &self,
+        [i, j, k]: [usize; 3],
+        z: f64,
+        tr_xy: &Point3<f64>,
+        cands: &[usize],
+    ) -> (f32, f64) {
+        let opts = self.opts;
+        let wall = opts.wall_thickness_mm;
+        let p = self.world(i as f64, j as f64, k as f64);
+        let bg = self.background_hu(&p, z, tr_xy);
+        if !cands.is_empty() {
+            let d = self.tree.sdf_among(&p, cands.iter().copied());
+            if d < wall + self.half_diag + self.mean_sp {
+                let fl = if d.abs() < self.half_diag + self.sub_w {
+                    self.lumen_fraction([i, j, k], cands)
+                } else if d < 0.0 {
+                    1.0
+                } else {
+                    0.0
+                };
+                let fo = (0.5 - (d - wall) / self.mean_sp).clamp(0.0, 1.0).max(fl);
+                let hu = (fl * opts.hu_air as f64
+                    + (fo - fl) * opts.hu_tissue as f64
+                    + (1.0 - fo) * bg as f64) as f32;
+                return (hu, fl);
+            }
+        }
+        (bg, 0.0)
+    }
+
+    /// Outside air, chest wall, mediastinum around the trachea above the carina, or textured
+    /// lung at `p` (HU).
+    fn background_hu(&self, p: &Point3<f64>, z: f64, tr_xy: &Point3<f64>) -> f32 {
+        let opts = self.opts;
+        let (centre, semi) = (self.grid.centre, self.grid.semi);
+        let qx = (p.x - centre[0]) / semi[0];
+        let qy = (p.y - centre[1]) / semi[1];
+        let ia = semi[0] - opts.chest_wall_mm;
+        let ib = semi[1] - opts.chest_wall_mm;
+        if qx * qx + qy * qy > 1.0 {
+            opts.hu_air
+        } else if ((p.x - centre[0]) / ia).powi(2) + ((p.y - centre[1]) / ib).powi(2) > 1.0
+            || (z > self.carina_z - 10.0
+                && ((p.x - tr_xy.x).powi(2) + (p.y - tr_xy.y).powi(2)).sqrt()
+                    < self.tree.branches[0].radius_start_mm + 12.0)
+        {
+            // Chest wall, or mediastinum around the trachea.
+            opts.hu_tissue
+        } else {
+            opts.hu_lung + opts.lung_texture_hu * self.texture.at(p) as f32
+        }
+    }
+
+    /// Fraction of voxel (i, j, k) inside the lumen: the mean over `supersample`³ sub-samples
+    /// of a linear ramp one sub-sample wide across the surface.
+    fn lumen_fraction(&self, [i, j, k]: [usize; 3], cands: &[usize]) -> f64 {
+        let ss = self.opts.supersample;
+        let o = |u: usize| (u as f64 + 0.5) / ss as f64 - 0.5;
+        let mut acc = 0.0;
+        for c in 0..ss {
+            for bb in 0..ss {
+                for aa in 0..ss {
+                    let q = self.world(i as f64 + o(aa), j as f64 + o(bb), k as f64 + o(c));
+                    let dq = self.tree.sdf_among(&q, cands.iter().copied());
+                    acc += (0.5 - dq / self.sub_w).clamp(0.0, 1.0);
+                }
+            }
+        }
+        acc / (ss * ss * ss) as f64
+    }
 }
 
 #[cfg(test)]

@@ -74,6 +74,10 @@ pub fn ct_from_mask_file(path: &Path, opts: &FromMaskOptions) -> Result<MaskPhan
 }
 
 /// Make a CT-like volume from a mask (lumen where the value exceeds 0.5).
+///
+/// Steps: binarise and crop; average blocks into the lumen fraction (its half-threshold is the
+/// truth); dilate the truth into the wall; fit a body outline if the grid has room; mix air,
+/// wall and background by the lumen fraction; blur; add noise.
 pub fn ct_from_mask(mask: &Volume<f32>, opts: &FromMaskOptions) -> Result<MaskPhantom> {
     // Written negated so NaN options are rejected too.
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -107,79 +111,13 @@ pub fn ct_from_mask(mask: &Volume<f32>, opts: &FromMaskOptions) -> Result<MaskPh
     let frac = block_average(&bin, opts.downsample);
     let truth = frac.map(|f| u8::from(f >= 0.5));
     let wall = dilate(&truth, opts.wall_thickness_mm);
-    let dims = frac.dims;
-    let [nx, ny, _] = dims;
-    // A body outline fits when an ellipse of 45 % x 38 % of the field of view around the grid
-    // centre keeps 25 mm between the airway and a 10 mm chest wall; only for axial grids.
-    let sp = frac.spacing();
-    let axial = frac.affine[(2, 2)].abs() > 0.9 * sp[2];
-    let semi = [0.45 * nx as f64 * sp[0], 0.38 * ny as f64 * sp[1]];
-    let centre = [(nx - 1) as f64 / 2.0, (ny - 1) as f64 / 2.0];
-    let (tlo, thi) = bounding_box(&truth).unwrap_or(([0; 3], [0; 3]));
-    let fits = axial
-        && [tlo, thi, [tlo[0], thi[1], 0], [thi[0], tlo[1], 0]]
-            .iter()
-            .all(|c| {
-                let qx = (c[0] as f64 - centre[0]) * sp[0] / (semi[0] - 35.0);
-                let qy = (c[1] as f64 - centre[1]) * sp[1] / (semi[1] - 35.0);
-                semi[1] > 60.0 && qx * qx + qy * qy < 1.0
-            });
-    let mut r = Pcg32::new(opts.seed, 0xBEEF);
-    let waves: Vec<([f64; 3], f64)> = (0..6)
-        .map(|_| {
-            (
-                [r.range(-0.5, 0.5), r.range(-0.5, 0.5), r.range(-0.5, 0.5)],
-                r.range(0.0, 6.3),
-            )
-        })
-        .collect();
-    let affine = frac.affine;
-    let slice = nx * ny;
-    let mut ct = vec![0f32; frac.len()];
-    ct.par_chunks_mut(slice).enumerate().for_each(|(k, out)| {
-        for j in 0..ny {
-            for i in 0..nx {
-                let n = i + nx * j;
-                let g = n + slice * k;
-                let bg = if fits && {
-                    let qx = (i as f64 - centre[0]) * sp[0];
-                    let qy = (j as f64 - centre[1]) * sp[1];
-                    let outer = (qx / semi[0]).powi(2) + (qy / semi[1]).powi(2);
-                    let inner = (qx / (semi[0] - 10.0)).powi(2) + (qy / (semi[1] - 10.0)).powi(2);
-                    if outer > 1.0 {
-                        out[n] = opts.hu_air;
-                        true
-                    } else if inner > 1.0 {
-                        out[n] = opts.hu_tissue;
-                        true
-                    } else {
-                        false
-                    }
-                } {
-                    out[n]
-                } else {
-                    let w = affine * Vector4::new(i as f64, j as f64, k as f64, 1.0);
-                    let t: f64 = waves
-                        .iter()
-                        .map(|(q, ph)| (q[0] * w.x + q[1] * w.y + q[2] * w.z + ph).sin())
-                        .sum::<f64>()
-                        / (waves.len() as f64).sqrt();
-                    opts.hu_lung + opts.lung_texture_hu * t as f32
-                };
-                let f = frac.data[g];
-                let around = if wall.data[g] != 0 {
-                    opts.hu_tissue
-                } else {
-                    bg
-                };
-                out[n] = f * opts.hu_air + (1.0 - f) * around;
-            }
-        }
-    });
-    let mut ct = Volume::from_data(dims, affine, ct)?;
+    let body = fit_body(&frac, &truth);
+    let mixed = mix_tissues(&frac, &wall, &body, opts);
+    let mut ct = Volume::from_data(frac.dims, frac.affine, mixed)?;
     if opts.blur_sigma_voxels > 0.0 {
         gaussian_blur(&mut ct, opts.blur_sigma_voxels);
     }
+    let slice = frac.dims[0] * frac.dims[1];
     ct.data
         .par_chunks_mut(slice)
         .enumerate()
@@ -192,8 +130,106 @@ pub fn ct_from_mask(mask: &Volume<f32>, opts: &FromMaskOptions) -> Result<MaskPh
     Ok(MaskPhantom {
         ct,
         truth_mask: truth,
-        has_body: fits,
+        has_body: body.fits,
     })
+}
+
+/// The body outline: an axis-aligned ellipse in every axial slice, around the grid centre.
+struct BodyOutline {
+    /// True when the outline is drawn.
+    fits: bool,
+    /// Semi-axes along i and j (mm).
+    semi: [f64; 2],
+    /// Centre (voxel indices i, j).
+    centre: [f64; 2],
+}
+
+/// A body outline fits when an ellipse of 45 % x 38 % of the field of view around the grid
+/// centre keeps 25 mm between the airway (`truth`'s box) and a 10 mm chest wall; only for
+/// axial grids.
+fn fit_body(frac: &Volume<f32>, truth: &Volume<u8>) -> BodyOutline {
+    let [nx, ny, _] = frac.dims;
+    let sp = frac.spacing();
+    let axial = frac.affine[(2, 2)].abs() > 0.9 * sp[2];
+    let semi = [0.45 * nx as f64 * sp[0], 0.38 * ny as f64 * sp[1]];
+    let centre = [(nx - 1) as f64 / 2.0, (ny - 1) as f64 / 2.0];
+    let (tlo, thi) = bounding_box(truth).unwrap_or(([0; 3], [0; 3]));
+    let fits = axial
+        && [tlo, thi, [tlo[0], thi[1], 0], [thi[0], tlo[1], 0]]
+            .iter()
+            .all(|c| {
+                let qx = (c[0] as f64 - centre[0]) * sp[0] / (semi[0] - 35.0);
+                let qy = (c[1] as f64 - centre[1]) * sp[1] / (semi[1] - 35.0);
+                semi[1] > 60.0 && qx * qx + qy * qy < 1.0
+            });
+    BodyOutline { fits, semi, centre }
+}
+
+/// HU before blur and noise: lumen air by the lumen fraction `frac`, over the wall's tissue
+/// where `wall` is set and over the background elsewhere (outside air or chest wall when the
+/// body outline is drawn, textured lung inside it).
+fn mix_tissues(
+    frac: &Volume<f32>,
+    wall: &Volume<u8>,
+    body: &BodyOutline,
+    opts: &FromMaskOptions,
+) -> Vec<f32> {
+    let [nx, ny, _] = frac.dims;
+    let sp = frac.spacing();
+    let (semi, centre) = (body.semi, body.centre);
+    let mut r = Pcg32::new(opts.seed, 0xBEEF);
+    let waves: Vec<([f64; 3], f64)> = (0..6)
+        .map(|_| {
+            (
+                [r.range(-0.5, 0.5), r.range(-0.5, 0.5), r.range(-0.5, 0.5)],
+                r.range(0.0, 6.3),
+            )
+        })
+        .collect();
+    let affine = frac.affine;
+    let slice = nx * ny;
+    // The outline's HU at (i, j): outside air, chest wall, or `None` inside the chest wall.
+    let outline_hu = |i: usize, j: usize| {
+        let qx = (i as f64 - centre[0]) * sp[0];
+        let qy = (j as f64 - centre[1]) * sp[1];
+        let outer = (qx / semi[0]).powi(2) + (qy / semi[1]).powi(2);
+        let inner = (qx / (semi[0] - 10.0)).powi(2) + (qy / (semi[1] - 10.0)).powi(2);
+        if outer > 1.0 {
+            Some(opts.hu_air)
+        } else if inner > 1.0 {
+            Some(opts.hu_tissue)
+        } else {
+            None
+        }
+    };
+    let lung_hu = |i: usize, j: usize, k: usize| {
+        let w = affine * Vector4::new(i as f64, j as f64, k as f64, 1.0);
+        let t: f64 = waves
+            .iter()
+            .map(|(q, ph)| (q[0] * w.x + q[1] * w.y + q[2] * w.z + ph).sin())
+            .sum::<f64>()
+            / (waves.len() as f64).sqrt();
+        opts.hu_lung + opts.lung_texture_hu * t as f32
+    };
+    let mut ct = vec![0f32; frac.len()];
+    ct.par_chunks_mut(slice).enumerate().for_each(|(k, out)| {
+        for j in 0..ny {
+            for i in 0..nx {
+                let n = i + nx * j;
+                let g = n + slice * k;
+                let outline = if body.fits { outline_hu(i, j) } else { None };
+                let bg = outline.unwrap_or_else(|| lung_hu(i, j, k));
+                let f = frac.data[g];
+                let around = if wall.data[g] != 0 {
+                    opts.hu_tissue
+                } else {
+                    bg
+                };
+                out[n] = f * opts.hu_air + (1.0 - f) * around;
+            }
+        }
+    });
+    ct
 }
 
 /// Mean of each `f`³ block of a 0/1 mask (partial blocks at the far edges are dropped); the

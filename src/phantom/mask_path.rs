@@ -33,10 +33,52 @@ pub struct MaskCentreline {
 
 /// Find the camera centreline through `mask` (nonzero = lumen); see the module docs.
 pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
-    let dims = mask.dims;
-    let sp = mask.spacing();
-    let n = mask.len();
     let dt_in = inside_distance(mask);
+    let comp = thickest_component(mask, &dt_in)?;
+    let sdf = signed_distance(&comp, &dt_in)?;
+    let start = top_start(&comp, &dt_in);
+    let sweep = sweep_shells(&comp, &dt_in, start);
+    if sweep.splits.len() < 2 {
+        return Err(GeometryError::Degenerate {
+            stage: "mask centreline",
+            message: format!(
+                "found {} of the two expected splits (carina, lobar) below the top",
+                sweep.splits.len()
+            ),
+        }
+        .into());
+    }
+    let target = sweep
+        .target
+        .or_else(|| best_of(&sweep.last_active, &dt_in))
+        .ok_or(VolumeError::Empty {
+            stage: "mask centreline",
+            what: "set of target voxels",
+        })?;
+    // Centred path: cost length / (dt + 0.5)², averaged over the edge's two voxels.
+    let chain = centred_path(&comp, &dt_in, start, target)?;
+    // The first 15 mm are dropped: segmentations often taper at the cut top of the trachea.
+    let pts: Vec<Point3<f64>> = chain.into_iter().map(|i| voxel_world(&comp, i)).collect();
+    let mut arc = 0.0;
+    let mut first = 0;
+    for k in 1..pts.len() {
+        arc += (pts[k] - pts[k - 1]).norm();
+        if arc >= 15.0 {
+            first = k;
+            break;
+        }
+    }
+    Ok(MaskCentreline {
+        points: pts[first..].to_vec(),
+        sdf,
+        split_depths_mm: sweep.splits,
+    })
+}
+
+/// The connected component of `mask` that holds its thickest voxel (largest inside distance
+/// `dt_in`, mm; the first one on ties).
+fn thickest_component(mask: &Volume<u8>, dt_in: &[f32]) -> Result<Volume<u8>> {
+    let dims = mask.dims;
     let (thick, &best) = dt_in
         .iter()
         .enumerate()
@@ -57,13 +99,19 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
         (thick / dims[0]) % dims[1],
         thick / (dims[0] * dims[1]),
     ];
-    let comp = component_of(mask, seed);
-    let dt_out: Vec<f32> = distance_transform_sq(dims, sp, |i| comp.data[i] != 0)
+    Ok(component_of(mask, seed))
+}
+
+/// Signed distance to the wall of `comp` (mm, negative inside): the inside distance `dt_in`
+/// or the outside one, shifted by half a mean voxel so the zero lies between voxel centres.
+fn signed_distance(comp: &Volume<u8>, dt_in: &[f32]) -> Result<Volume<f32>> {
+    let sp = comp.spacing();
+    let dt_out: Vec<f32> = distance_transform_sq(comp.dims, sp, |i| comp.data[i] != 0)
         .into_iter()
         .map(f32::sqrt)
         .collect();
     let half = ((sp[0] + sp[1] + sp[2]) / 6.0) as f32;
-    let sdf_data: Vec<f32> = (0..n)
+    let sdf_data: Vec<f32> = (0..comp.len())
         .map(|i| {
             if comp.data[i] != 0 {
                 half - dt_in[i]
@@ -72,42 +120,69 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
             }
         })
         .collect();
-    let sdf = Volume::from_data(dims, mask.affine, sdf_data)?;
-    let a = mask.affine;
-    let world = |i: usize| {
-        mask.index_to_world(Point3::new(
-            (i % dims[0]) as f64,
-            ((i / dims[0]) % dims[1]) as f64,
-            (i / (dims[0] * dims[1])) as f64,
-        ))
-    };
-    let wz = |i: usize| {
-        a[(2, 0)] * (i % dims[0]) as f64
-            + a[(2, 1)] * ((i / dims[0]) % dims[1]) as f64
-            + a[(2, 2)] * (i / (dims[0] * dims[1])) as f64
-            + a[(2, 3)]
-    };
-    let members: Vec<usize> = (0..n).filter(|&i| comp.data[i] != 0).collect();
+    Volume::from_data(comp.dims, comp.affine, sdf_data)
+}
+
+/// World position (mm) of the centre of voxel `i` (linear index).
+fn voxel_world(grid: &Volume<u8>, i: usize) -> Point3<f64> {
+    let dims = grid.dims;
+    grid.index_to_world(Point3::new(
+        (i % dims[0]) as f64,
+        ((i / dims[0]) % dims[1]) as f64,
+        (i / (dims[0] * dims[1])) as f64,
+    ))
+}
+
+/// World height z (mm) of the centre of voxel `i` (linear index).
+fn voxel_z(grid: &Volume<u8>, i: usize) -> f64 {
+    let (a, dims) = (&grid.affine, grid.dims);
+    a[(2, 0)] * (i % dims[0]) as f64
+        + a[(2, 1)] * ((i / dims[0]) % dims[1]) as f64
+        + a[(2, 2)] * (i / (dims[0] * dims[1])) as f64
+        + a[(2, 3)]
+}
+
+/// The start: the most central voxel of the component's top 3 mm.
+fn top_start(comp: &Volume<u8>, dt_in: &[f32]) -> usize {
+    let members: Vec<usize> = (0..comp.len()).filter(|&i| comp.data[i] != 0).collect();
     let ztop = members
         .iter()
-        .map(|&i| wz(i))
+        .map(|&i| voxel_z(comp, i))
         .fold(f64::NEG_INFINITY, f64::max);
-    let start = *members
+    *members
         .iter()
-        .filter(|&&i| wz(i) > ztop - 3.0)
+        .filter(|&&i| voxel_z(comp, i) > ztop - 3.0)
         .max_by(|&&x, &&y| dt_in[x].total_cmp(&dt_in[y]).then(y.cmp(&x)))
-        .expect("the component is not empty");
+        .expect("the component is not empty")
+}
+
+/// What the sweep over geodesic shells found.
+struct Sweep {
+    /// Geodesic depth (mm) of each split where a branch was chosen.
+    splits: Vec<f64>,
+    /// The most central voxel 20 mm past the lobar split, when the followed branch gets there.
+    target: Option<usize>,
+    /// The followed voxels of the last shell that did not end the sweep.
+    last_active: Vec<usize>,
+}
+
+/// Sweep the geodesic depth from `start` in shells, following one branch: a shell whose
+/// followed voxels fall into two or more sizeable pieces (from 12 mm down) is a split, where
+/// [`choose_branch`] keeps one piece and drops the others with everything below them.
+fn sweep_shells(comp: &Volume<u8>, dt_in: &[f32], start: usize) -> Sweep {
+    let (dims, sp, n) = (comp.dims, comp.spacing(), comp.len());
     let nb = neighbours(sp);
     let tree = dijkstra(&comp.data, dims, &nb, start, None, |_, _, l| l);
     let (geo, pred, order) = (&tree.dist, &tree.pred, &tree.order);
-
-    // Sweep geodesic shells; label 1 = still followed, 2 = dropped.
+    // Label 1 = still followed, 2 = dropped; a voxel inherits its predecessor's label.
     let shell = (2.0f64).max(2.5 * sp[0].max(sp[1]).max(sp[2])) as f32;
     let mut label = vec![0u8; n];
     let mut slot = vec![u32::MAX; n];
-    let mut splits: Vec<f64> = Vec::new();
-    let mut target: Option<usize> = None;
-    let mut last_active: Vec<usize> = Vec::new();
+    let mut sweep = Sweep {
+        splits: Vec::new(),
+        target: None,
+        last_active: Vec::new(),
+    };
     let mut idx = 0;
     while idx < order.len() {
         let s0 = (geo[order[idx] as usize] / shell).floor();
@@ -128,80 +203,59 @@ pub fn mask_centreline(mask: &Volume<u8>) -> Result<MaskCentreline> {
             break;
         }
         let comps = components(&members, dims, &nb, &mut slot);
-        let big: Vec<&Vec<usize>> = {
-            let largest = comps.iter().map(Vec::len).max().unwrap_or(0);
-            comps
-                .iter()
-                .filter(|c| c.len() >= 3 && c.len() * 8 >= largest)
-                .collect()
-        };
+        let largest = comps.iter().map(Vec::len).max().unwrap_or(0);
+        let big: Vec<&Vec<usize>> = comps
+            .iter()
+            .filter(|c| c.len() >= 3 && c.len() * 8 >= largest)
+            .collect();
         let depth = (s0 * shell) as f64;
         if big.len() >= 2 && depth >= 12.0 {
-            let mean = |c: &Vec<usize>, f: &dyn Fn(usize) -> f64| {
-                c.iter().map(|&v| f(v)).sum::<f64>() / c.len() as f64
-            };
-            let keep = match splits.len() {
-                0 => big
-                    .iter()
-                    .min_by(|p, q| mean(p, &|v| world(v).x).total_cmp(&mean(q, &|v| world(v).x))),
-                1 => big
-                    .iter()
-                    .min_by(|p, q| mean(p, &wz).total_cmp(&mean(q, &wz))),
-                _ => big.iter().max_by(|p, q| {
-                    mean(p, &|v| dt_in[v] as f64).total_cmp(&mean(q, &|v| dt_in[v] as f64))
-                }),
-            }
-            .copied()
-            .expect("two or more pieces");
+            let keep = choose_branch(&big, sweep.splits.len(), comp, dt_in);
             for &v in &members {
                 label[v] = 2;
             }
             for &v in keep {
                 label[v] = 1;
             }
-            splits.push(depth);
+            sweep.splits.push(depth);
             members = keep.clone();
         }
-        if splits.len() >= 2 && depth >= splits[1] + 20.0 {
-            target = best_of(&members, &dt_in);
+        if sweep.splits.len() >= 2 && depth >= sweep.splits[1] + 20.0 {
+            sweep.target = best_of(&members, dt_in);
             break;
         }
-        last_active = members;
+        sweep.last_active = members;
     }
-    if splits.len() < 2 {
-        return Err(GeometryError::Degenerate {
-            stage: "mask centreline",
-            message: format!(
-                "found {} of the two expected splits (carina, lobar) below the top",
-                splits.len()
-            ),
-        }
-        .into());
+    sweep
+}
+
+/// The piece followed past split number `split` (0 = carina): the patient's left one (least
+/// mean x), then the lower one (least mean z), then the thicker one (largest mean `dt_in`).
+fn choose_branch<'p>(
+    big: &[&'p Vec<usize>],
+    split: usize,
+    comp: &Volume<u8>,
+    dt_in: &[f32],
+) -> &'p Vec<usize> {
+    let mean = |c: &Vec<usize>, f: &dyn Fn(usize) -> f64| {
+        c.iter().map(|&v| f(v)).sum::<f64>() / c.len() as f64
+    };
+    let x = |v: usize| voxel_world(comp, v).x;
+    let z = |v: usize| voxel_z(comp, v);
+    let dt = |v: usize| dt_in[v] as f64;
+    match split {
+        0 => big
+            .iter()
+            .min_by(|p, q| mean(p, &x).total_cmp(&mean(q, &x))),
+        1 => big
+            .iter()
+            .min_by(|p, q| mean(p, &z).total_cmp(&mean(q, &z))),
+        _ => big
+            .iter()
+            .max_by(|p, q| mean(p, &dt).total_cmp(&mean(q, &dt))),
     }
-    let target = target
-        .or_else(|| best_of(&last_active, &dt_in))
-        .ok_or(VolumeError::Empty {
-            stage: "mask centreline",
-            what: "set of target voxels",
-        })?;
-    // Centred path: cost length / (dt + 0.5)², averaged over the edge's two voxels.
-    let chain = centred_path(&comp, &dt_in, start, target)?;
-    // The first 15 mm are dropped: segmentations often taper at the cut top of the trachea.
-    let pts: Vec<Point3<f64>> = chain.into_iter().map(world).collect();
-    let mut arc = 0.0;
-    let mut first = 0;
-    for k in 1..pts.len() {
-        arc += (pts[k] - pts[k - 1]).norm();
-        if arc >= 15.0 {
-            first = k;
-            break;
-        }
-    }
-    Ok(MaskCentreline {
-        points: pts[first..].to_vec(),
-        sdf,
-        split_depths_mm: splits,
-    })
+    .copied()
+    .expect("two or more pieces")
 }
 
 /// The most central voxel (largest distance to the wall) of a set.

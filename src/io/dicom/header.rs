@@ -237,6 +237,96 @@ fn text(obj: &DefaultDicomObject, tag: dicom_object::Tag) -> String {
         .unwrap_or_default()
 }
 
+/// The attributes of one parsed data set, read with errors that name its file.
+struct Attributes<'a> {
+    name: &'a Path,
+    obj: &'a DefaultDicomObject,
+}
+
+impl Attributes<'_> {
+    fn missing(&self, what: &str) -> Error {
+        Error::invalid(self.name, format!("missing or malformed {what}"))
+    }
+
+    /// An unsigned integer attribute.
+    fn uint(&self, tag: dicom_object::Tag, what: &str) -> Result<u32> {
+        self.obj
+            .get(tag)
+            .and_then(|e| e.to_int::<u32>().ok())
+            .ok_or_else(|| self.missing(what))
+    }
+
+    /// Exactly `n` finite numbers.
+    fn floats(&self, tag: dicom_object::Tag, what: &str, n: usize) -> Result<Vec<f64>> {
+        let v = self
+            .obj
+            .get(tag)
+            .and_then(|e| e.to_multi_float64().ok())
+            .ok_or_else(|| self.missing(what))?;
+        if v.len() != n || !v.iter().all(|x| x.is_finite()) {
+            return Err(Error::invalid(
+                self.name,
+                format!("{what} must hold {n} finite numbers, found {v:?}"),
+            ));
+        }
+        Ok(v)
+    }
+
+    /// An optional finite number (absent, malformed and non-finite values read as `None`).
+    fn opt_float(&self, tag: dicom_object::Tag) -> Option<f64> {
+        self.obj
+            .get(tag)
+            .and_then(|e| e.to_float64().ok())
+            .filter(|v| v.is_finite())
+    }
+
+    /// Fail unless the data set is one slice of a volume: not a localizer, one frame.
+    fn check_one_slice(&self) -> Result<()> {
+        let image_type = text(self.obj, tags::IMAGE_TYPE);
+        if image_type.to_ascii_uppercase().contains("LOCALIZER") {
+            return Err(Error::invalid(
+                self.name,
+                format!("is a 2-D localizer (ImageType {image_type}), not a slice of the CT volume; move it out of the series folder"),
+            ));
+        }
+        let frames = match self.obj.get(tags::NUMBER_OF_FRAMES) {
+            None => 1,
+            Some(e) => e
+                .to_int::<i64>()
+                .map_err(|_| self.missing("NumberOfFrames"))?,
+        };
+        if frames != 1 {
+            return Err(Error::unsupported(
+                self.name,
+                format!("multi-frame image (NumberOfFrames {frames}); only one slice per file is supported"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// ImagePositionPatient, ImageOrientationPatient and PixelSpacing (which must be positive).
+    fn placement(&self) -> Result<([f64; 3], [f64; 6], [f64; 2])> {
+        let position = self.floats(tags::IMAGE_POSITION_PATIENT, "ImagePositionPatient", 3)?;
+        let orientation = self.floats(
+            tags::IMAGE_ORIENTATION_PATIENT,
+            "ImageOrientationPatient",
+            6,
+        )?;
+        let spacing = self.floats(tags::PIXEL_SPACING, "PixelSpacing", 2)?;
+        if !(spacing[0] > 0.0 && spacing[1] > 0.0) {
+            return Err(Error::invalid(
+                self.name,
+                format!("PixelSpacing {spacing:?} must be positive"),
+            ));
+        }
+        Ok((
+            [position[0], position[1], position[2]],
+            std::array::from_fn(|a| orientation[a]),
+            [spacing[0], spacing[1]],
+        ))
+    }
+}
+
 impl SliceHeader {
     /// Read the header of `src` (not its pixel data) and check that its pixel data can be held
     /// by a file of its size and decoded by this build.
@@ -251,57 +341,19 @@ impl SliceHeader {
             .transfer_syntax()
             .trim_end_matches(['\0', ' '])
             .to_string();
-        let missing = |what: &str| Error::invalid(name, format!("missing or malformed {what}"));
-        let uint = |tag, what: &str| -> Result<u32> {
-            obj.get(tag)
-                .and_then(|e| e.to_int::<u32>().ok())
-                .ok_or_else(|| missing(what))
-        };
-        let floats = |tag, what: &str, n: usize| -> Result<Vec<f64>> {
-            let v = obj
-                .get(tag)
-                .and_then(|e| e.to_multi_float64().ok())
-                .ok_or_else(|| missing(what))?;
-            if v.len() != n || !v.iter().all(|x| x.is_finite()) {
-                return Err(Error::invalid(
-                    name,
-                    format!("{what} must hold {n} finite numbers, found {v:?}"),
-                ));
-            }
-            Ok(v)
-        };
-        let opt_float = |tag| -> Option<f64> {
-            obj.get(tag)
-                .and_then(|e| e.to_float64().ok())
-                .filter(|v| v.is_finite())
-        };
-
-        let image_type = text(&obj, tags::IMAGE_TYPE);
-        if image_type.to_ascii_uppercase().contains("LOCALIZER") {
-            return Err(Error::invalid(
-                name,
-                format!("is a 2-D localizer (ImageType {image_type}), not a slice of the CT volume; move it out of the series folder"),
-            ));
-        }
-        let frames = match obj.get(tags::NUMBER_OF_FRAMES) {
-            None => 1,
-            Some(e) => e.to_int::<i64>().map_err(|_| missing("NumberOfFrames"))?,
-        };
-        if frames != 1 {
-            return Err(Error::unsupported(
-                name,
-                format!("multi-frame image (NumberOfFrames {frames}); only one slice per file is supported"),
-            ));
-        }
-        let rows = uint(tags::ROWS, "Rows")?;
-        let cols = uint(tags::COLUMNS, "Columns")?;
+        let at = Attributes { name, obj: &obj };
+        at.check_one_slice()?;
+        let rows = at.uint(tags::ROWS, "Rows")?;
+        let cols = at.uint(tags::COLUMNS, "Columns")?;
         if rows == 0 || cols == 0 {
             return Err(Error::invalid(
                 name,
                 format!("image is {cols}x{rows} pixels (Columns x Rows)"),
             ));
         }
-        let spp = uint(tags::SAMPLES_PER_PIXEL, "SamplesPerPixel").unwrap_or(1);
+        let spp = at
+            .uint(tags::SAMPLES_PER_PIXEL, "SamplesPerPixel")
+            .unwrap_or(1);
         let photometric = text(&obj, tags::PHOTOMETRIC_INTERPRETATION);
         if spp != 1 || !(photometric == "MONOCHROME2" || photometric == "MONOCHROME1") {
             return Err(Error::unsupported(
@@ -309,13 +361,18 @@ impl SliceHeader {
                 format!("PhotometricInterpretation '{photometric}' with {spp} samples per pixel; a CT slice must be MONOCHROME1/2 with 1 sample"),
             ));
         }
-        let bits_allocated = uint(tags::BITS_ALLOCATED, "BitsAllocated")? as u16;
-        let bits_stored =
-            uint(tags::BITS_STORED, "BitsStored").unwrap_or(bits_allocated as u32) as u16;
-        let high_bit = uint(tags::HIGH_BIT, "HighBit")
+        let bits_allocated = at.uint(tags::BITS_ALLOCATED, "BitsAllocated")? as u16;
+        let bits_stored = at
+            .uint(tags::BITS_STORED, "BitsStored")
+            .unwrap_or(bits_allocated as u32) as u16;
+        let high_bit = at
+            .uint(tags::HIGH_BIT, "HighBit")
             .unwrap_or((bits_stored as u32).saturating_sub(1)) as u16;
         check_bits(name, bits_allocated, bits_stored, high_bit)?;
-        let signed = uint(tags::PIXEL_REPRESENTATION, "PixelRepresentation").unwrap_or(0) == 1;
+        let signed = at
+            .uint(tags::PIXEL_REPRESENTATION, "PixelRepresentation")
+            .unwrap_or(0)
+            == 1;
 
         // Before any pixel buffer exists: a corrupt or hostile header must not make us
         // allocate gigabytes, nor reach a decoder this build lacks.
@@ -327,19 +384,7 @@ impl SliceHeader {
             file_len,
         )?;
         check_decodable(name, &transfer_syntax, bits_stored)?;
-        let position = floats(tags::IMAGE_POSITION_PATIENT, "ImagePositionPatient", 3)?;
-        let orientation = floats(
-            tags::IMAGE_ORIENTATION_PATIENT,
-            "ImageOrientationPatient",
-            6,
-        )?;
-        let spacing = floats(tags::PIXEL_SPACING, "PixelSpacing", 2)?;
-        if !(spacing[0] > 0.0 && spacing[1] > 0.0) {
-            return Err(Error::invalid(
-                name,
-                format!("PixelSpacing {spacing:?} must be positive"),
-            ));
-        }
+        let (position, orientation, pixel_spacing) = at.placement()?;
         Ok(SliceHeader {
             source: 0,
             path: name.to_path_buf(),
@@ -354,13 +399,15 @@ impl SliceHeader {
             high_bit,
             signed,
             encapsulated,
-            position: [position[0], position[1], position[2]],
-            orientation: std::array::from_fn(|a| orientation[a]),
-            pixel_spacing: [spacing[0], spacing[1]],
-            slice_thickness: opt_float(tags::SLICE_THICKNESS).filter(|v| *v > 0.0),
-            spacing_between_slices: opt_float(tags::SPACING_BETWEEN_SLICES).filter(|v| *v > 0.0),
-            slope: opt_float(tags::RESCALE_SLOPE).unwrap_or(1.0),
-            intercept: opt_float(tags::RESCALE_INTERCEPT).unwrap_or(0.0),
+            position,
+            orientation,
+            pixel_spacing,
+            slice_thickness: at.opt_float(tags::SLICE_THICKNESS).filter(|v| *v > 0.0),
+            spacing_between_slices: at
+                .opt_float(tags::SPACING_BETWEEN_SLICES)
+                .filter(|v| *v > 0.0),
+            slope: at.opt_float(tags::RESCALE_SLOPE).unwrap_or(1.0),
+            intercept: at.opt_float(tags::RESCALE_INTERCEPT).unwrap_or(0.0),
         })
     }
 }

@@ -15,12 +15,13 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
+use crate::image::Frame;
 use crate::io::case::Case;
 use crate::math::Point3;
 use crate::phantom::case::phantom_albedo;
 use crate::phantom::render::LightModel;
 use crate::phantom::MucosaAlbedo;
-use crate::raycast::{cast_frame_with, RayTable, Scene};
+use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
 use crate::shading::frame_shading::LUMA;
 use crate::shading::CalibratedModel;
 use crate::{Error, Result};
@@ -148,90 +149,131 @@ pub fn shading_residuals(
     };
     let wanted: Vec<usize> = (0..n).step_by(frame_step.max(1)).collect();
     let frames = case.frames_at(&wanted)?;
-    let rays = RayTable::new(&case.camera);
-    let cone_k = truth.light.cone_exponent();
-    let lum = |c: [f64; 3]| LUMA[0] * c[0] + LUMA[1] * c[1] + LUMA[2] * c[2];
+    let evaluator = FrameEvaluator {
+        case,
+        scene,
+        rays: RayTable::new(&case.camera),
+        cone_k: truth.light.cone_exponent(),
+        truth: &truth,
+        law,
+        reference,
+    };
     let per_frame: Vec<FrameResiduals> = frames
         .par_iter()
-        .map(|(&f, frame)| {
-            let gb = cast_frame_with(scene, &rays, &case.poses[f].pose.camera_to_world);
-            let hits: Vec<usize> = (0..gb.z.len()).filter(|&i| gb.hit(i)).collect();
-            let albedo: Vec<[f32; 3]> = hits
-                .iter()
-                .map(|&i| {
-                    let p = gb.point[i];
-                    truth
-                        .albedo
-                        .eval(Point3::new(p[0] as f64, p[1] as f64, p[2] as f64))
-                })
-                .collect();
-            // The phantom's direct radiance per hit and its inter-reflection (a fraction of the
-            // frame's mean direct luminance), as its renderer computes them.
-            let direct: Vec<[f64; 3]> = match law {
-                ShadingLaw::Phantom => hits
-                    .iter()
-                    .zip(&albedo)
-                    .map(|(&i, &a)| {
-                        let (cos_t, cos_g) = (rays.dirs[i][2] as f64, gb.gamma[i] as f64);
-                        truth
-                            .light
-                            .direct_radiance(a, cos_t, cos_g, gb.z[i] as f64, cone_k)
-                    })
-                    .collect(),
-                ShadingLaw::Fitted(_) => Vec::new(),
-            };
-            let mean_direct =
-                direct.iter().map(|&d| lum(d)).sum::<f64>() / hits.len().max(1) as f64;
-            let ambient = truth.light.interreflection(mean_direct);
-            let gain = truth.gains[f] / reference;
-            let mut bins = vec![(0.0, 0usize); Z_BINS + 2 * ANGLE_BINS];
-            let mut res = Vec::with_capacity(hits.len());
-            for (k, &i) in hits.iter().enumerate() {
-                let obs = &frame.rgb[3 * i..3 * i + 3];
-                let o = lum([obs[0], obs[1], obs[2]].map(f64::from));
-                if obs.iter().any(|&v| v >= 0.98) || o < 0.01 {
-                    continue;
-                }
-                let (cos_g, cos_t, z) =
-                    (gb.gamma[i] as f64, rays.dirs[i][2] as f64, gb.z[i] as f64);
-                let pred = match law {
-                    ShadingLaw::Fitted(m) => {
-                        // Any ambient term reflects off the local albedo (inter-reflection).
-                        let s = m.eval_rgb(cos_g, cos_t, z, gain);
-                        let a = m.ambient_of(f);
-                        let to_gain = gain / m.gains[f];
-                        lum([0, 1, 2].map(|c| (s[c] + a[c] * to_gain) * albedo[k][c] as f64))
-                    }
-                    ShadingLaw::Phantom => {
-                        let d = direct[k];
-                        gain * lum([0, 1, 2].map(|c| d[c] + ambient * albedo[k][c] as f64))
-                    }
-                };
-                if pred.is_nan() || pred <= 0.0 {
-                    continue;
-                }
-                let r = (o / pred).ln();
-                res.push(r);
-                let zb = (z as usize).min(Z_BINS - 1);
-                let tb = ((cos_t.acos().to_degrees() / 5.0) as usize).min(ANGLE_BINS - 1);
-                let gbin = ((cos_g.acos().to_degrees() / 5.0) as usize).min(ANGLE_BINS - 1);
-                for b in [zb, Z_BINS + tb, Z_BINS + ANGLE_BINS + gbin] {
-                    bins[b].0 += r;
-                    bins[b].1 += 1;
-                }
-            }
-            let mean = res.iter().sum::<f64>() / res.len().max(1) as f64;
-            let median = if res.is_empty() {
-                0.0
-            } else {
-                let mid = res.len() / 2;
-                *res.select_nth_unstable_by(mid, f64::total_cmp).1
-            };
-            FrameResiduals { mean, median, bins }
-        })
+        .map(|(&f, frame)| evaluator.residuals(f, frame))
         .collect();
+    summarise(wanted, &per_frame)
+}
+
+/// Luminance of a linear RGB triple.
+fn luminance(c: [f64; 3]) -> f64 {
+    LUMA[0] * c[0] + LUMA[1] * c[1] + LUMA[2] * c[2]
+}
+
+/// Everything a frame's residuals need besides the frame.
+struct FrameEvaluator<'a> {
+    case: &'a Case,
+    scene: &'a Scene,
+    rays: RayTable,
+    truth: &'a PhantomTruth,
+    law: ShadingLaw<'a>,
+    /// True gain of the fitted light's reference frame (1 for the phantom's law): the fitted
+    /// gains are relative to it.
+    reference: f64,
+    /// Exponent of the phantom light's cone.
+    cone_k: f64,
+}
+
+impl FrameEvaluator<'_> {
+    /// Ray cast frame `f`, predict each usable hit pixel and bin the log residuals.
+    fn residuals(&self, f: usize, frame: &Frame) -> FrameResiduals {
+        let (rays, truth) = (&self.rays, self.truth);
+        let gb = cast_frame_with(self.scene, rays, &self.case.poses[f].pose.camera_to_world);
+        let hits: Vec<usize> = (0..gb.z.len()).filter(|&i| gb.hit(i)).collect();
+        let albedo: Vec<[f32; 3]> = hits
+            .iter()
+            .map(|&i| {
+                let p = gb.point[i];
+                truth
+                    .albedo
+                    .eval(Point3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+            })
+            .collect();
+        let direct = self.phantom_direct(&gb, &hits, &albedo);
+        let mean_direct =
+            direct.iter().map(|&d| luminance(d)).sum::<f64>() / hits.len().max(1) as f64;
+        let ambient = truth.light.interreflection(mean_direct);
+        let gain = truth.gains[f] / self.reference;
+        let mut bins = vec![(0.0, 0usize); Z_BINS + 2 * ANGLE_BINS];
+        let mut res = Vec::with_capacity(hits.len());
+        for (k, &i) in hits.iter().enumerate() {
+            let obs = &frame.rgb[3 * i..3 * i + 3];
+            let o = luminance([obs[0], obs[1], obs[2]].map(f64::from));
+            if obs.iter().any(|&v| v >= 0.98) || o < 0.01 {
+                continue;
+            }
+            let (cos_g, cos_t, z) = (gb.gamma[i] as f64, rays.dirs[i][2] as f64, gb.z[i] as f64);
+            let pred = match self.law {
+                ShadingLaw::Fitted(m) => {
+                    // Any ambient term reflects off the local albedo (inter-reflection).
+                    let s = m.eval_rgb(cos_g, cos_t, z, gain);
+                    let a = m.ambient_of(f);
+                    let to_gain = gain / m.gains[f];
+                    luminance([0, 1, 2].map(|c| (s[c] + a[c] * to_gain) * albedo[k][c] as f64))
+                }
+                ShadingLaw::Phantom => {
+                    let d = direct[k];
+                    gain * luminance([0, 1, 2].map(|c| d[c] + ambient * albedo[k][c] as f64))
+                }
+            };
+            if pred.is_nan() || pred <= 0.0 {
+                continue;
+            }
+            let r = (o / pred).ln();
+            res.push(r);
+            let zb = (z as usize).min(Z_BINS - 1);
+            let tb = ((cos_t.acos().to_degrees() / 5.0) as usize).min(ANGLE_BINS - 1);
+            let gbin = ((cos_g.acos().to_degrees() / 5.0) as usize).min(ANGLE_BINS - 1);
+            for b in [zb, Z_BINS + tb, Z_BINS + ANGLE_BINS + gbin] {
+                bins[b].0 += r;
+                bins[b].1 += 1;
+            }
+        }
+        let mean = res.iter().sum::<f64>() / res.len().max(1) as f64;
+        let median = if res.is_empty() {
+            0.0
+        } else {
+            let mid = res.len() / 2;
+            *res.select_nth_unstable_by(mid, f64::total_cmp).1
+        };
+        FrameResiduals { mean, median, bins }
+    }
+
+    /// Under the phantom's law, its direct radiance at every hit, as its renderer computes it
+    /// (the inter-reflection is a fraction of the frame's mean direct luminance); empty under
+    /// the fitted law.
+    fn phantom_direct(&self, gb: &GBuffer, hits: &[usize], albedo: &[[f32; 3]]) -> Vec<[f64; 3]> {
+        match self.law {
+            ShadingLaw::Phantom => hits
+                .iter()
+                .zip(albedo)
+                .map(|(&i, &a)| {
+                    let (cos_t, cos_g) = (self.rays.dirs[i][2] as f64, gb.gamma[i] as f64);
+                    let z = gb.z[i] as f64;
+                    self.truth
+                        .light
+                        .direct_radiance(a, cos_t, cos_g, z, self.cone_k)
+                })
+                .collect(),
+            ShadingLaw::Fitted(_) => Vec::new(),
+        }
+    }
+}
+
+/// Pool the frames' bins into the profiles and centre the per-frame means and medians.
+fn summarise(wanted: Vec<usize>, per_frame: &[FrameResiduals]) -> Result<ShadingResiduals> {
     let mut bins = vec![(0.0, 0usize); Z_BINS + 2 * ANGLE_BINS];
-    for fr in &per_frame {
+    for fr in per_frame {
         for (b, x) in bins.iter_mut().zip(&fr.bins) {
             b.0 += x.0;
             b.1 += x.1;

@@ -8,6 +8,7 @@
 use rayon::prelude::*;
 
 use super::Atlas;
+use crate::math::Vector3;
 use crate::mesh::GeometryError;
 use crate::mesh::TriMesh;
 use crate::Result;
@@ -131,6 +132,38 @@ fn distance_to_triangle(p: [f64; 2], a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f
 /// and interpolated normal. `mesh` is the mesh the atlas was built from (its vertex normals are
 /// used, so normals are smooth across UV seams).
 pub fn rasterize_texels(atlas: &Atlas, mesh: &TriMesh) -> Result<TexelGeometry> {
+    check_same_mesh(atlas, mesh)?;
+    let normals = mesh.vertex_normals();
+    let mut by_chart: Vec<Vec<u32>> = vec![Vec::new(); atlas.chart_count];
+    for (t, &c) in atlas.chart_of_triangle.iter().enumerate() {
+        by_chart[c as usize].push(t as u32);
+    }
+    let parts: Vec<TexelGeometry> = by_chart
+        .par_iter()
+        .enumerate()
+        .map(|(chart, tris)| rasterize_chart(atlas, mesh, &normals, chart as u32, tris))
+        .collect();
+    let mut out = TexelGeometry {
+        width: atlas.width,
+        height: atlas.height,
+        ..Default::default()
+    };
+    let total: usize = parts.iter().map(|p| p.texel.len()).sum();
+    out.texel.reserve(total);
+    for p in parts {
+        out.texel.extend(p.texel);
+        out.triangle.extend(p.triangle);
+        out.bary.extend(p.bary);
+        out.point.extend(p.point);
+        out.normal.extend(p.normal);
+        out.chart.extend(p.chart);
+    }
+    Ok(out)
+}
+
+/// Fail unless `mesh` is the mesh `atlas` was built from: the same triangles, corner by
+/// corner, through the atlas's map of split vertices to original ones.
+fn check_same_mesh(atlas: &Atlas, mesh: &TriMesh) -> Result<()> {
     if mesh.triangles.len() != atlas.mesh.triangles.len()
         || atlas
             .original_vertex
@@ -154,114 +187,138 @@ pub fn rasterize_texels(atlas: &Atlas, mesh: &TriMesh) -> Result<TexelGeometry> 
         }
         .into());
     }
-    let normals = mesh.vertex_normals();
+    Ok(())
+}
+
+/// A rectangle of texels: columns x0..=x1, rows y0..=y1.
+#[derive(Clone, Copy)]
+struct TexelBox {
+    x0: usize,
+    y0: usize,
+    x1: usize,
+    y1: usize,
+}
+
+impl TexelBox {
+    fn width(&self) -> usize {
+        self.x1 + 1 - self.x0
+    }
+
+    fn height(&self) -> usize {
+        self.y1 + 1 - self.y0
+    }
+}
+
+/// The texels of one chart (triangles `tris`), in row-major order within the chart's box.
+fn rasterize_chart(
+    atlas: &Atlas,
+    mesh: &TriMesh,
+    normals: &[Vector3<f32>],
+    chart: u32,
+    tris: &[u32],
+) -> TexelGeometry {
+    let mut part = TexelGeometry::default();
+    if tris.is_empty() {
+        return part;
+    }
     let (w, h) = (atlas.width as usize, atlas.height as usize);
     let uv_tex = |v: u32| {
         let p = atlas.uv[v as usize];
         [p[0] as f64 * w as f64, p[1] as f64 * h as f64]
     };
-    let mut by_chart: Vec<Vec<u32>> = vec![Vec::new(); atlas.chart_count];
-    for (t, &c) in atlas.chart_of_triangle.iter().enumerate() {
-        by_chart[c as usize].push(t as u32);
-    }
-    let parts: Vec<TexelGeometry> = by_chart
-        .par_iter()
-        .enumerate()
-        .map(|(chart, tris)| {
-            let mut part = TexelGeometry::default();
-            if tris.is_empty() {
-                return part;
-            }
-            let corners: Vec<[[f64; 2]; 3]> = tris
-                .iter()
-                .map(|&t| atlas.mesh.triangles[t as usize].map(uv_tex))
-                .collect();
-            // Chart bounding box grown by the bilinear reach.
-            let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-            for c in corners.iter().flatten() {
-                x0 = x0.min(c[0]);
-                y0 = y0.min(c[1]);
-                x1 = x1.max(c[0]);
-                y1 = y1.max(c[1]);
-            }
-            let bx0 = ((x0 - 1.5).floor().max(0.0)) as usize;
-            let by0 = ((y0 - 1.5).floor().max(0.0)) as usize;
-            let bx1 = ((x1 + 0.5).ceil().max(0.0) as usize).min(w - 1);
-            let by1 = ((y1 + 0.5).ceil().max(0.0) as usize).min(h - 1);
-            let bw = bx1 + 1 - bx0;
-            let bh = by1 + 1 - by0;
-            // Best (distance, triangle slot) per texel of the box.
-            let mut best = vec![(f64::INFINITY, u32::MAX); bw * bh];
-            for (slot, [a, b, c]) in corners.iter().enumerate() {
-                let tx0 = ((a[0].min(b[0]).min(c[0]) - 1.5).floor().max(bx0 as f64)) as usize;
-                let ty0 = ((a[1].min(b[1]).min(c[1]) - 1.5).floor().max(by0 as f64)) as usize;
-                let tx1 = ((a[0].max(b[0]).max(c[0]) + 0.5).ceil() as usize).min(bx1);
-                let ty1 = ((a[1].max(b[1]).max(c[1]) + 0.5).ceil() as usize).min(by1);
-                for y in ty0..=ty1 {
-                    for x in tx0..=tx1 {
-                        let ctr = [x as f64 + 0.5, y as f64 + 0.5];
-                        if !square_hits_triangle(ctr, 1.0, *a, *b, *c) {
-                            continue;
-                        }
-                        let d = distance_to_triangle(ctr, *a, *b, *c);
-                        let cell = &mut best[(y - by0) * bw + (x - bx0)];
-                        if d < cell.0 {
-                            *cell = (d, slot as u32);
-                        }
-                    }
-                }
-            }
-            for y in 0..bh {
-                for x in 0..bw {
-                    let (_, slot) = best[y * bw + x];
-                    if slot == u32::MAX {
-                        continue;
-                    }
-                    let t = tris[slot as usize];
-                    let [a, b, c] = corners[slot as usize];
-                    let ctr = [(x + bx0) as f64 + 0.5, (y + by0) as f64 + 0.5];
-                    let Some(l) = barycentric(ctr, a, b, c) else {
-                        continue; // a degenerate UV triangle has no plane to extrapolate
-                    };
-                    let tri = mesh.triangles[t as usize];
-                    let p = tri.map(|v| mesh.positions[v as usize].coords.cast::<f64>());
-                    let point = p[0] * l[0] + p[1] * l[1] + p[2] * l[2];
-                    let lc = l.map(|x| x.max(0.0));
-                    let s = lc[0] + lc[1] + lc[2];
-                    let mut n = (normals[tri[0] as usize].cast::<f64>() * lc[0]
-                        + normals[tri[1] as usize].cast::<f64>() * lc[1]
-                        + normals[tri[2] as usize].cast::<f64>() * lc[2])
-                        / s;
-                    if n.norm() < 1e-9 {
-                        n = (p[1] - p[0]).cross(&(p[2] - p[0]));
-                    }
-                    let n = n.try_normalize(0.0).unwrap_or_default();
-                    part.texel.push(((y + by0) * w + x + bx0) as u32);
-                    part.triangle.push(t);
-                    part.bary.push(l.map(|x| x as f32));
-                    part.point
-                        .push([point.x as f32, point.y as f32, point.z as f32]);
-                    part.normal.push([n.x as f32, n.y as f32, n.z as f32]);
-                    part.chart.push(chart as u32);
-                }
-            }
-            part
-        })
+    let corners: Vec<[[f64; 2]; 3]> = tris
+        .iter()
+        .map(|&t| atlas.mesh.triangles[t as usize].map(uv_tex))
         .collect();
-    let mut out = TexelGeometry {
-        width: atlas.width,
-        height: atlas.height,
-        ..Default::default()
-    };
-    let total: usize = parts.iter().map(|p| p.texel.len()).sum();
-    out.texel.reserve(total);
-    for p in parts {
-        out.texel.extend(p.texel);
-        out.triangle.extend(p.triangle);
-        out.bary.extend(p.bary);
-        out.point.extend(p.point);
-        out.normal.extend(p.normal);
-        out.chart.extend(p.chart);
+    // Chart bounding box grown by the bilinear reach.
+    let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    for c in corners.iter().flatten() {
+        x0 = x0.min(c[0]);
+        y0 = y0.min(c[1]);
+        x1 = x1.max(c[0]);
+        y1 = y1.max(c[1]);
     }
-    Ok(out)
+    let bx = TexelBox {
+        x0: ((x0 - 1.5).floor().max(0.0)) as usize,
+        y0: ((y0 - 1.5).floor().max(0.0)) as usize,
+        x1: ((x1 + 0.5).ceil().max(0.0) as usize).min(w - 1),
+        y1: ((y1 + 0.5).ceil().max(0.0) as usize).min(h - 1),
+    };
+    let best = nearest_triangles(&corners, bx);
+    let bw = bx.width();
+    for y in 0..bx.height() {
+        for x in 0..bw {
+            let (_, slot) = best[y * bw + x];
+            if slot == u32::MAX {
+                continue;
+            }
+            let t = tris[slot as usize];
+            let [a, b, c] = corners[slot as usize];
+            let (tx, ty) = (x + bx.x0, y + bx.y0);
+            let ctr = [tx as f64 + 0.5, ty as f64 + 0.5];
+            let Some(l) = barycentric(ctr, a, b, c) else {
+                continue; // a degenerate UV triangle has no plane to extrapolate
+            };
+            let (point, n) = texel_point_normal(mesh, normals, t, l);
+            part.texel.push((ty * w + tx) as u32);
+            part.triangle.push(t);
+            part.bary.push(l.map(|x| x as f32));
+            part.point
+                .push([point.x as f32, point.y as f32, point.z as f32]);
+            part.normal.push([n.x as f32, n.y as f32, n.z as f32]);
+            part.chart.push(chart);
+        }
+    }
+    part
+}
+
+/// Per texel of `bx` (row-major), the distance (texels) to the nearest triangle whose bilinear
+/// reach covers it, and that triangle's slot in `corners` (`u32::MAX`: none).
+fn nearest_triangles(corners: &[[[f64; 2]; 3]], bx: TexelBox) -> Vec<(f64, u32)> {
+    let bw = bx.width();
+    let mut best = vec![(f64::INFINITY, u32::MAX); bw * bx.height()];
+    for (slot, [a, b, c]) in corners.iter().enumerate() {
+        let tx0 = ((a[0].min(b[0]).min(c[0]) - 1.5).floor().max(bx.x0 as f64)) as usize;
+        let ty0 = ((a[1].min(b[1]).min(c[1]) - 1.5).floor().max(bx.y0 as f64)) as usize;
+        let tx1 = ((a[0].max(b[0]).max(c[0]) + 0.5).ceil() as usize).min(bx.x1);
+        let ty1 = ((a[1].max(b[1]).max(c[1]) + 0.5).ceil() as usize).min(bx.y1);
+        for y in ty0..=ty1 {
+            for x in tx0..=tx1 {
+                let ctr = [x as f64 + 0.5, y as f64 + 0.5];
+                if !square_hits_triangle(ctr, 1.0, *a, *b, *c) {
+                    continue;
+                }
+                let d = distance_to_triangle(ctr, *a, *b, *c);
+                let cell = &mut best[(y - bx.y0) * bw + (x - bx.x0)];
+                if d < cell.0 {
+                    *cell = (d, slot as u32);
+                }
+            }
+        }
+    }
+    best
+}
+
+/// The point (world mm) at barycentrics `l` on the plane of mesh triangle `t`, and the unit
+/// normal interpolated with the barycentrics clamped to the triangle (the face normal where
+/// the vertex normals cancel).
+fn texel_point_normal(
+    mesh: &TriMesh,
+    normals: &[Vector3<f32>],
+    t: u32,
+    l: [f64; 3],
+) -> (Vector3<f64>, Vector3<f64>) {
+    let tri = mesh.triangles[t as usize];
+    let p = tri.map(|v| mesh.positions[v as usize].coords.cast::<f64>());
+    let point = p[0] * l[0] + p[1] * l[1] + p[2] * l[2];
+    let lc = l.map(|x| x.max(0.0));
+    let s = lc[0] + lc[1] + lc[2];
+    let mut n = (normals[tri[0] as usize].cast::<f64>() * lc[0]
+        + normals[tri[1] as usize].cast::<f64>() * lc[1]
+        + normals[tri[2] as usize].cast::<f64>() * lc[2])
+        / s;
+    if n.norm() < 1e-9 {
+        n = (p[1] - p[0]).cross(&(p[2] - p[0]));
+    }
+    (point, n.try_normalize(0.0).unwrap_or_default())
 }
