@@ -18,6 +18,7 @@ pub mod render;
 pub mod rng;
 pub mod shading;
 pub mod texture;
+pub mod viewer;
 pub mod volume;
 pub mod workflow;
 
