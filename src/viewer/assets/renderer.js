@@ -77,7 +77,8 @@ BS.Renderer = (function () {
       this.canvas = canvas;
       this.model = model;
       this.meta = model.meta;
-      this.surface = compile(gl, BS.shaders.surfaceVS, BS.shaders.surfaceFS);
+      this.surface = compile(gl, BS.shaders.surfaceVS, BS.shaders.surfaceFS(model.meta.shading));
+      this.depthOnly = compile(gl, BS.shaders.surfaceVS, BS.shaders.depthFS);
       this.reduce = compile(gl, BS.shaders.quadVS, BS.shaders.reduceFS);
       this.composite = compile(gl, BS.shaders.quadVS, BS.shaders.compositeFS);
       this.uploadMesh();
@@ -175,14 +176,6 @@ BS.Renderer = (function () {
       gl.uniform1i(u.uAlbedoOnly, view.albedoOnly ? 1 : 0);
       if (sh.kind === "calibrated") {
         gl.uniform1i(u.uKind, 0);
-        const rho = new Float32Array(48);
-        sh.rho.forEach((c, ch) => c.forEach((v, i) => { rho[16 * ch + i] = v; }));
-        gl.uniform1fv(u.uRho, rho);
-        gl.uniform1i(u.uRhoN, sh.rho[0].length);
-        const s = new Float32Array(16);
-        sh.s.forEach((v, i) => { s[i] = v; });
-        gl.uniform1fv(u.uS, s);
-        gl.uniform1i(u.uSN, sh.s.length);
         gl.uniform1f(u.uCosEdge, sh.cos_theta_edge);
         gl.uniform3fv(u.uAmbient, sh.ambient);
         return;
@@ -206,6 +199,16 @@ BS.Renderer = (function () {
       gl.uniform1fv(u.uPsiW, W);
     }
 
+    // The vertex shader's camera uniforms.
+    setCamera(u, A, worldToCam, cam) {
+      const gl = this.gl;
+      gl.uniform3fv(u.uOrigin, A.t);
+      gl.uniformMatrix3fv(u.uWorldToCam, false, worldToCam);
+      if (u.uIntr) gl.uniform4f(u.uIntr, cam.fx, cam.fy, cam.cx, cam.cy);
+      if (u.uSize) gl.uniform2f(u.uSize, cam.width, cam.height);
+      gl.uniform2f(u.uDepth, NEAR_MM, FAR_MM);
+    }
+
     // Draw `view` = { pose, camera {width, height, fx, fy, cx, cy}, gain, autoExposure,
     // albedoOnly } into the canvas (whose size must be the camera's).
     draw(view) {
@@ -224,13 +227,19 @@ BS.Renderer = (function () {
       gl.depthFunc(gl.LESS);
       gl.disable(gl.CULL_FACE);
       gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+      // Depth first (no colour), then shade only the nearest surface of each pixel.
+      const d = this.depthOnly;
+      gl.useProgram(d.prog);
+      this.setCamera(d.loc, A, worldToCam, cam);
+      gl.colorMask(false, false, false, false);
+      gl.bindVertexArray(this.vao);
+      gl.drawElements(gl.TRIANGLES, this.indexCount, gl.UNSIGNED_INT, 0);
+      gl.colorMask(true, true, true, true);
+      gl.depthFunc(gl.LEQUAL);
+      gl.depthMask(false);
       gl.useProgram(s.prog);
-      gl.uniform3fv(s.loc.uOrigin, A.t);
-      gl.uniformMatrix3fv(s.loc.uWorldToCam, false, worldToCam);
+      this.setCamera(s.loc, A, worldToCam, cam);
       gl.uniformMatrix3fv(s.loc.uCamToWorld, false, camToWorld);
-      gl.uniform4f(s.loc.uIntr, cam.fx, cam.fy, cam.cx, cam.cy);
-      gl.uniform2f(s.loc.uSize, cam.width, cam.height);
-      gl.uniform2f(s.loc.uDepth, NEAR_MM, FAR_MM);
       gl.activeTexture(gl.TEXTURE0); gl.bindTexture(gl.TEXTURE_2D, this.tex0);
       gl.activeTexture(gl.TEXTURE1); gl.bindTexture(gl.TEXTURE_2D, this.texMips);
       gl.uniform1i(s.loc.uTex0, 0);
@@ -241,9 +250,9 @@ BS.Renderer = (function () {
       gl.uniform2f(s.loc.uAtlasSize, this.meta.texture.width, this.meta.texture.height);
       gl.uniform1f(s.loc.uTexelMm, this.meta.texture.texel_mm);
       this.setShading(view);
-      gl.bindVertexArray(this.vao);
       gl.drawElements(gl.TRIANGLES, this.indexCount, gl.UNSIGNED_INT, 0);
       gl.bindVertexArray(null);
+      gl.depthMask(true);
       gl.disable(gl.DEPTH_TEST);
       // Reduction passes.
       const r = this.reduce;

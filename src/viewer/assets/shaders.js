@@ -26,6 +26,7 @@ uniform vec2 uDepth;  // near, far (mm)
 out vec3 vRel;
 out vec3 vNormal;
 out vec2 vUv;
+invariant gl_Position;
 void main() {
   vRel = aPos - uOrigin;
   vNormal = aNormal;
@@ -39,7 +40,23 @@ void main() {
     c.z);
 }`;
 
-  const surfaceFS = header + `
+  // The light's Bernstein polynomials as code: de Casteljau with the coefficients inlined
+  // (uniform arrays indexed in loops are several times slower on software renderers).
+  function casteljau(name, coeffs) {
+    const c = coeffs.length ? coeffs : [0];
+    const lines = c.map((v, i) => `  float b${i} = ${Number(v).toExponential(17)};`);
+    for (let k = c.length - 1; k >= 1; k--) {
+      for (let i = 0; i < k; i++) lines.push(`  b${i} = b${i} * (1.0 - t) + b${i + 1} * t;`);
+    }
+    return `float ${name}(float t) {\n${lines.join("\n")}\n  return b0;\n}\n`;
+  }
+
+  function lightFunctions(shading) {
+    if (shading.kind !== "calibrated") return casteljau("lightS", [1]) + [0, 1, 2].map((c) => casteljau("rho" + c, [0])).join("");
+    return casteljau("lightS", shading.s) + shading.rho.map((r, c) => casteljau("rho" + c, r)).join("");
+  }
+
+  const surfaceTemplate = header + `
 in vec3 vRel;
 in vec3 vNormal;
 in vec2 vUv;
@@ -55,10 +72,6 @@ uniform vec2 uAtlasSize;
 uniform float uTexelMm;
 uniform int uKind;             // 0 calibrated light, 1 the paper's Psi
 uniform int uAlbedoOnly;
-uniform float uRho[48];        // rho coefficients, channel c at [16 c ..]
-uniform int uRhoN;
-uniform float uS[16];
-uniform int uSN;
 uniform float uCosEdge;
 uniform vec3 uAmbient;
 uniform int uPsiCount;         // blended viewpoints (<= 4)
@@ -68,14 +81,7 @@ uniform vec2 uPsiZ[4];         // z_min, z_max
 uniform float uPsiW[4];        // weights
 out vec4 outColor;
 
-float bernstein(int base, int n, float t, bool rho) {
-  float b[16];
-  for (int i = 0; i < 16; i++) { if (i >= n) break; b[i] = rho ? uRho[base + i] : uS[i]; }
-  for (int k = n - 1; k >= 1; k--) {
-    for (int i = 0; i < 16; i++) { if (i >= k) break; b[i] = b[i] * (1.0 - t) + b[i + 1] * t; }
-  }
-  return b[0];
-}
+LIGHT_FUNCTIONS
 
 vec3 imageRay(vec2 px) {
   return normalize(vec3((px.x - uIntr.z) / uIntr.x, (px.y - uIntr.w) / uIntr.y, 1.0));
@@ -129,9 +135,7 @@ void main() {
   vec3 offset = vec3(0.0);
   if (uKind == 0) {
     float t = clamp((1.0 - ray.z) / (1.0 - uCosEdge), 0.0, 1.0);
-    float k = bernstein(0, uSN, t, false) / (z * z);
-    scale = k * vec3(bernstein(0, uRhoN, gamma, true), bernstein(16, uRhoN, gamma, true),
-                     bernstein(32, uRhoN, gamma, true));
+    scale = lightS(t) / (z * z) * vec3(rho0(gamma), rho1(gamma), rho2(gamma));
     offset = uAmbient;
   } else {
     float s = 1.0 - gamma;
@@ -151,6 +155,13 @@ void main() {
   }
   outColor = vec4(scale * a + offset, 1.0);
 }`;
+
+  const surfaceFS = (shading) => surfaceTemplate.replace("LIGHT_FUNCTIONS", lightFunctions(shading));
+
+  // The depth pre-pass: every pixel is then shaded once, by its nearest surface.
+  const depthFS = header + `
+out vec4 outColor;
+void main() { outColor = vec4(0.0); }`;
 
   const quadVS = header + `
 void main() {
@@ -210,5 +221,5 @@ void main() {
   outColor = vec4(srgb(lin.r), srgb(lin.g), srgb(lin.b), 1.0);
 }`;
 
-  return { surfaceVS, surfaceFS, quadVS, reduceFS, compositeFS };
+  return { surfaceVS, surfaceFS, depthFS, quadVS, reduceFS, compositeFS };
 })();
