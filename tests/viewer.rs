@@ -157,14 +157,16 @@ fn the_viewer_draws_what_render_draws_and_navigates_inside_the_lumen() {
     let nav = drive(&["navigate", "viewer"], dir);
     eprintln!("navigation: {nav}");
     let f = |k: &str| nav[k].as_f64().unwrap();
-    // 0.5 s at 5 mm/s: about 2.5 mm straight ahead (frame timing makes it inexact).
-    assert!(f("forwardAlongView") > 1.0 && f("forwardAlongView") < 4.0, "{nav}");
+    // W held 0.5 s at 5 mm/s: 2.5 mm straight ahead (keys are timed by their events; the
+    // driver's own latency may add a little).
+    assert!(f("forwardAlongView") > 2.3 && f("forwardAlongView") < 3.5, "{nav}");
     assert!(f("forwardMoveMm") - f("forwardAlongView") < 0.05, "{nav}");
     // A 100 px drag to the right at 0.004 rad/px: 22.9 degrees to the right, in place.
     assert!((f("turnDeg") - 22.92).abs() < 0.5, "{nav}");
     assert_eq!(nav["turnedRight"], true);
     assert!(f("lookMovedCentre") < 1e-9);
-    assert!(f("rollDeg") > 5.0, "{nav}");
+    // E held 0.3 s at 1.2 rad/s: 20.6 degrees of roll.
+    assert!(f("rollDeg") > 19.0 && f("rollDeg") < 30.0, "{nav}");
     // The wall: 3 s at 40 mm/s would cross the airway many times; the camera stops at the
     // clearance, the field says it is inside, and 2 mm further on is outside the lumen.
     let wall = &nav["wall"];

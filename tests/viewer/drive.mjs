@@ -103,6 +103,14 @@ const state = (page) => page.evaluate(() => {
   return { pose: n.pose, centre: a.t, forward: a.z, down: a.y, wall: n.distance(a.t), blocked: n.blocked, pathPos: n.pathPos, playing: n.playing, clearance: n.clearanceMm, drawn: window.bronchosim.app.framesDrawn };
 });
 
+// Hold `key` for `ms` milliseconds, then wait until the viewer has applied all of it.
+async function hold(page, key, ms) {
+  await page.keyboard.down(key);
+  await page.waitForTimeout(ms);
+  await page.keyboard.up(key);
+  await page.waitForFunction(() => window.bronchosim.nav.keys.size === 0 && window.bronchosim.nav.tapped.length === 0);
+}
+
 async function navigate(viewer) {
   return withBrowser(async (ctx) => {
     const { page, loadMs } = await openInteractive(ctx, viewer, 640, 480);
@@ -111,28 +119,24 @@ async function navigate(viewer) {
     r.start = s0;
     // Keys: hold W for 0.5 s at the default speed: the camera moves forward.
     await page.focus("#view");
-    await page.keyboard.down("w");
-    await page.waitForTimeout(500);
-    await page.keyboard.up("w");
+    await hold(page, "w", 500);
     const s1 = await state(page);
     r.forwardMoveMm = Math.hypot(...s1.centre.map((v, i) => v - s0.centre[i]));
     r.forwardAlongView = s1.centre.map((v, i) => v - s0.centre[i]).reduce((s, d, i) => s + d * s0.forward[i], 0);
-    // Mouse: drag 100 px to the right: the view turns right (forward gains a component along
-    // the old right axis), the centre stays.
+    // Mouse: drag 100 px to the right on the canvas left of the control panel: the view turns
+    // right (forward gains a component along the old right axis), the centre stays.
     const s1Right = await page.evaluate(() => BS.math.axes(window.bronchosim.nav.pose).x);
-    await page.mouse.move(300, 240);
+    await page.mouse.move(40, 240);
     await page.mouse.down();
-    await page.mouse.move(350, 240, { steps: 5 });
-    await page.mouse.move(400, 240, { steps: 5 });
+    await page.mouse.move(90, 240, { steps: 5 });
+    await page.mouse.move(140, 240, { steps: 5 });
     await page.mouse.up();
     const s2 = await state(page);
     r.turnDeg = (Math.acos(Math.min(1, s2.forward.reduce((s, d, i) => s + d * s1.forward[i], 0))) * 180) / Math.PI;
     r.turnedRight = s2.forward.reduce((s, d, i) => s + d * s1Right[i], 0) > 0;
     r.lookMovedCentre = Math.hypot(...s2.centre.map((v, i) => v - s1.centre[i]));
     // Roll: hold E for 0.3 s: down rotates about forward.
-    await page.keyboard.down("e");
-    await page.waitForTimeout(300);
-    await page.keyboard.up("e");
+    await hold(page, "e", 300);
     const s3 = await state(page);
     r.rollDeg = (Math.acos(Math.min(1, s3.down.reduce((s, d, i) => s + d * s2.down[i], 0))) * 180) / Math.PI;
     // The wall: turn to face the nearest wall and fly at it fast for 3 s.
@@ -144,9 +148,7 @@ async function navigate(viewer) {
       n.speed = 40;
     });
     const sWall0 = await state(page);
-    await page.keyboard.down("w");
-    await page.waitForTimeout(3000);
-    await page.keyboard.up("w");
+    await hold(page, "w", 3000);
     const sWall = await state(page);
     r.wall = { before: sWall0.wall, after: sWall.wall, clearance: sWall.clearance, blocked: sWall.blocked - sWall0.blocked, moved: Math.hypot(...sWall.centre.map((v, i) => v - sWall0.centre[i])) };
     // Sample the straight line from the wall position 2 mm further along the view: it must
@@ -167,7 +169,8 @@ async function navigate(viewer) {
     const sEnd = await state(page);
     const last = await page.evaluate(() => window.bronchosim.nav.path[window.bronchosim.nav.path.length - 1]);
     r.autopilot = { seconds: (Date.now() - t0) / 1000, pathPos: sEnd.pathPos, endOffMm: Math.hypot(last[3] - sEnd.centre[0], last[7] - sEnd.centre[1], last[11] - sEnd.centre[2]), drawn: sEnd.drawn - sWall.drawn };
-    // The pose box reads back the current pose in poses.json form.
+    // The pose box reads back the current pose in poses.json form (refreshed every 200 ms).
+    await page.waitForTimeout(400);
     const box = await page.evaluate(() => JSON.parse(document.getElementById("pose").value));
     r.poseBoxOffMm = Math.hypot(box.frames[0].camera_to_world[3] - sEnd.centre[0], box.frames[0].camera_to_world[7] - sEnd.centre[1], box.frames[0].camera_to_world[11] - sEnd.centre[2]);
     return r;

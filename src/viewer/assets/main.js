@@ -94,7 +94,8 @@ window.BS = window.BS || {};
       window.addEventListener("resize", () => this.invalidate());
       let last = performance.now();
       const frame = (now) => {
-        const dt = Math.min((now - last) / 1000, 0.1);
+        // Real time, so that a slow renderer moves as far per second (capped after a pause).
+        const dt = Math.min((now - last) / 1000, 0.5);
         last = now;
         this.nav.step(dt);
         if (this.dirty) {

@@ -19,30 +19,44 @@ BS.Navigation = (function () {
       this.turnRate = 0.004;     // radians per pixel of mouse drag
       this.rollRate = 1.2;       // radians per second
       this.clearanceMm = 0.5;
-      this.keys = new Set();
+      this.keys = new Map();     // key held -> time (ms) up to which its move is applied
+      this.tapped = [];          // [key, seconds held] released since the last step
       this.playing = false;
       this.pathPos = 0;          // autopilot position along the path, 0..1
       this.autopilotSpeed = 5;   // mm/s
-      this.blocked = 0;          // moves the wall stopped
+      this.blocked = 0;          // steps the wall stopped or deflected
     }
 
     setPose(p) { this.pose = p.slice(); this.onChange(); }
 
-    // Move the centre by `d` (mm, world), never closer to the wall than the clearance: a move
-    // into the wall keeps only its component along the wall; a camera already too close may
-    // still move away from the wall. Returns true when the camera moved.
+    // Move the centre by `d` (mm, world) in steps of at most 0.25 mm, never closer to the wall
+    // than the clearance: a step into the wall keeps only its component along the wall (when
+    // that is at least 30% of it: a camera flown head-on into the wall stops); a camera already
+    // too close may still move away from the wall. Returns true when the camera moved.
     tryMove(d) {
+      const n = Math.max(1, Math.ceil(M.norm(d) / 0.25));
+      const step = M.scale(d, 1 / n);
+      let moved = false;
+      for (let i = 0; i < n; i++) {
+        if (!this.tryStep(step)) break;
+        moved = true;
+      }
+      return moved;
+    }
+
+    tryStep(d) {
       const A = M.axes(this.pose);
       const here = this.distance(A.t);
       const ok = (p) => { const dp = this.distance(p); return dp >= this.clearanceMm || dp > here + 1e-6; };
       let target = M.add(A.t, d);
       if (!ok(target)) {
+        this.blocked++;
         const g = this.gradient(target);
         const into = M.dot(d, g);
         const slide = into < 0 ? M.sub(d, M.scale(g, into)) : d;
+        if (M.norm(slide) < 0.3 * M.norm(d)) return false;
         target = M.add(A.t, slide);
-        if (!ok(target) || M.norm(slide) < 1e-9) { this.blocked++; return false; }
-        this.blocked++;
+        if (!ok(target)) return false;
       }
       this.pose = M.moved(this.pose, target);
       return true;
@@ -59,7 +73,18 @@ BS.Navigation = (function () {
       return M.normalize(g);
     }
 
-    // Advance by dt seconds: keys held and the autopilot.
+    // Seconds each movement key was held since the last step (keys are timed by their events,
+    // not sampled per frame, so that a slow renderer or a short tap moves the right distance).
+    heldSeconds(now) {
+      const secs = new Map();
+      const add = (k, t) => secs.set(k, (secs.get(k) || 0) + Math.max(t, 0));
+      for (const [k, t] of this.tapped) add(k, t);
+      this.tapped = [];
+      for (const [k, since] of this.keys) { add(k, (now - since) / 1000); this.keys.set(k, now); }
+      return secs;
+    }
+
+    // Advance by dt seconds (the autopilot) and apply the keys held since the last step.
     step(dt) {
       let changed = false;
       if (this.playing) {
@@ -68,22 +93,20 @@ BS.Navigation = (function () {
         if (this.pathPos >= 1) this.playing = false;
         changed = true;
       }
-      const k = this.keys;
-      if (k.size) {
+      if (this.keys.size || this.tapped.length) {
+        const fast = this.keys.has("Shift") ? 4 : 1;
+        const secs = this.heldSeconds(performance.now());
+        const t = (...names) => names.reduce((s, n) => s + (secs.get(n) || 0), 0);
         const A = M.axes(this.pose);
-        const fast = k.has("Shift") ? 4 : 1;
-        const v = this.speed * fast * dt;
+        const v = this.speed * fast;
         let d = [0, 0, 0];
         const along = (axis, s) => { d = M.add(d, M.scale(axis, s * v)); };
-        if (k.has("w") || k.has("ArrowUp")) along(A.z, 1);
-        if (k.has("s") || k.has("ArrowDown")) along(A.z, -1);
-        if (k.has("d") || k.has("ArrowRight")) along(A.x, 1);
-        if (k.has("a") || k.has("ArrowLeft")) along(A.x, -1);
-        if (k.has("r") || k.has("PageUp")) along(A.y, -1);
-        if (k.has("f") || k.has("PageDown")) along(A.y, 1);
+        along(A.z, t("w", "ArrowUp") - t("s", "ArrowDown"));
+        along(A.x, t("d", "ArrowRight") - t("a", "ArrowLeft"));
+        along(A.y, t("f", "PageDown") - t("r", "PageUp"));
         if (M.norm(d) > 0) { this.playing = false; changed = this.tryMove(d) || changed; }
-        if (k.has("q")) { this.pose = M.turn(this.pose, "z", -this.rollRate * dt); changed = true; }
-        if (k.has("e")) { this.pose = M.turn(this.pose, "z", this.rollRate * dt); changed = true; }
+        const roll = t("e") - t("q");
+        if (roll) { this.pose = M.turn(this.pose, "z", this.rollRate * roll); changed = true; }
       }
       if (changed) this.onChange();
       return changed;
@@ -115,11 +138,15 @@ BS.Navigation = (function () {
         if (editing(e)) return;
         if (e.key === "+" || e.key === "=") { this.speed = Math.min(this.speed * 1.25, 200); this.onChange(); return; }
         if (e.key === "-" || e.key === "_") { this.speed = Math.max(this.speed / 1.25, 0.1); this.onChange(); return; }
-        this.keys.add(keyName(e));
-        if (e.key === "Shift") this.keys.add("Shift");
+        const k = keyName(e);
+        if (!this.keys.has(k)) this.keys.set(k, performance.now());
         if (/^(Arrow|Page)/.test(e.key)) e.preventDefault();
       });
-      window.addEventListener("keyup", (e) => { this.keys.delete(keyName(e)); if (e.key === "Shift") this.keys.delete("Shift"); });
+      window.addEventListener("keyup", (e) => {
+        const k = keyName(e);
+        if (this.keys.has(k)) this.tapped.push([k, (performance.now() - this.keys.get(k)) / 1000]);
+        this.keys.delete(k);
+      });
       window.addEventListener("blur", () => this.keys.clear());
       let last = null;
       el.addEventListener("mousedown", (e) => { last = [e.clientX, e.clientY]; e.preventDefault(); });
