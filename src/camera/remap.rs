@@ -1,9 +1,8 @@
 //! Bilinear resampling of one image through an [`UndistortMap`], as cv2.remap (INTER_LINEAR,
 //! BORDER_CONSTANT), in one pass over output tiles with the taps computed on the fly.
 
-use super::remap_plan::check_map;
+use super::remap_plan::{check_map, check_source};
 use super::UndistortMap;
-use crate::image::error::ImageError;
 use crate::Result;
 use rayon::prelude::*;
 use std::mem::MaybeUninit;
@@ -24,15 +23,7 @@ pub fn remap_bilinear(
     fill: f32,
 ) -> Result<Vec<f32>> {
     let (sw, sh) = (src_width as usize, src_height as usize);
-    if channels == 0 || src.len() != sw * sh * channels {
-        return Err(ImageError::BufferSize {
-            stage: "remap",
-            what: "the source image",
-            got: src.len(),
-            expected: sw * sh * channels.max(1),
-        }
-        .into());
-    }
+    check_source(src, src_width, src_height, channels)?;
     check_map(map, src_width, src_height)?;
     // One pass over output tiles, computing taps on the fly (exact f32 weights); no plan kept.
     let src = Source {

@@ -145,6 +145,21 @@ const BAND_ROWS: usize = 16;
 /// the source's last pixel, past which the 3-channel kernel would read one value).
 const BORDER: u32 = 1 << 31;
 
+/// Check that `data` holds a `width` x `height` image of `channels` (at least 1) values a pixel.
+pub(super) fn check_source(data: &[f32], width: u32, height: u32, channels: usize) -> Result<()> {
+    let n = width as usize * height as usize;
+    if channels == 0 || data.len() != n * channels {
+        return Err(ImageError::BufferSize {
+            stage: "remap",
+            what: "the source image",
+            got: data.len(),
+            expected: n * channels.max(1),
+        }
+        .into());
+    }
+    Ok(())
+}
+
 pub(super) fn check_map(map: &UndistortMap, src_width: u32, src_height: u32) -> Result<()> {
     let n = map.width as usize * map.height as usize;
     if map.map_x.len() != n || map.map_y.len() != n {
@@ -180,15 +195,7 @@ struct Image<'a> {
 impl<'a> Image<'a> {
     fn new(data: &'a [f32], width: u32, height: u32, c: usize, fill: f32) -> Result<Self> {
         let (w, h) = (width as usize, height as usize);
-        if c == 0 || data.len() != w * h * c {
-            return Err(ImageError::BufferSize {
-                stage: "remap",
-                what: "the source image",
-                got: data.len(),
-                expected: w * h * c.max(1),
-            }
-            .into());
-        }
+        check_source(data, width, height, c)?;
         Ok(Self {
             data,
             w,

@@ -69,3 +69,28 @@ pub enum ShadingError {
     #[error("the {0} shading model was not fitted")]
     NotFitted(ShadingKind),
 }
+
+/// Check one weight per sample (`samples` of them), each finite and non-negative: what every
+/// weighted fit (`fit` names it in the error) requires of its weights.
+pub fn check_weights(
+    fit: &'static str,
+    weights: &[f32],
+    samples: usize,
+) -> Result<(), ShadingError> {
+    if weights.len() != samples {
+        return Err(ShadingError::LengthMismatch {
+            fit,
+            what: "weights",
+            got: weights.len(),
+            expected: samples,
+        });
+    }
+    match weights.iter().position(|w| !(w.is_finite() && *w >= 0.0)) {
+        Some(index) => Err(ShadingError::BadWeight {
+            fit,
+            index,
+            value: f64::from(weights[index]),
+        }),
+        None => Ok(()),
+    }
+}

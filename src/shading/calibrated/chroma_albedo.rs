@@ -32,6 +32,7 @@ use rayon::prelude::*;
 use super::fit::{fit_calibrated_with_albedo, CalibratedOptions};
 use super::model::CalibratedModel;
 use super::samples::PooledSamples;
+use crate::shading::error::check_weights;
 use crate::shading::ShadingError;
 use crate::Result;
 
@@ -268,15 +269,7 @@ pub fn refit_with_chroma_albedo(
     density: &[f32],
     opts: &CalibratedOptions,
 ) -> Result<ChromaAlbedo> {
-    if density.len() != samples.len() {
-        return Err(ShadingError::LengthMismatch {
-            fit: FIT,
-            what: "weights",
-            got: density.len(),
-            expected: samples.len(),
-        }
-        .into());
-    }
+    check_weights(FIT, density, samples.len())?;
     let res = residuals(model, samples);
     let chroma = ChromaAlbedo::fit_residuals(&res, density, &samples.frame_start)?;
     let albedo = chroma.albedo_of(&res);

@@ -27,6 +27,7 @@ use super::moments::{accumulate, cost, t_of, Layout};
 use super::samples::PooledSamples;
 use super::solver::{bounds, clamp_to, min_positive, rho_scale, solve};
 use crate::shading::bernstein::bernstein_eval;
+use crate::shading::error::check_weights;
 use crate::shading::robust::Robust;
 use crate::shading::ShadingError;
 use crate::Result;
@@ -201,23 +202,7 @@ fn check_inputs(samples: &PooledSamples, density: &[f32], opts: &CalibratedOptio
         }
         .into());
     }
-    if density.len() != samples.len() {
-        return Err(ShadingError::LengthMismatch {
-            fit: FIT,
-            what: "weights",
-            got: density.len(),
-            expected: samples.len(),
-        }
-        .into());
-    }
-    if let Some(i) = density.iter().position(|w| !(w.is_finite() && *w >= 0.0)) {
-        return Err(ShadingError::BadWeight {
-            fit: FIT,
-            index: i,
-            value: f64::from(density[i]),
-        }
-        .into());
-    }
+    check_weights(FIT, density, samples.len())?;
     if let Some(f) = (0..f).find(|&f| samples.frame_start[f] == samples.frame_start[f + 1]) {
         return Err(ShadingError::FrameWithoutSamples { frame: f }.into());
     }

@@ -20,6 +20,7 @@
 use super::moments::{accumulate, Quadratic};
 use super::psi::PsiModel;
 use crate::shading::bernstein::eval3;
+use crate::shading::error::check_weights;
 use crate::shading::robust::Robust;
 use crate::shading::samples::SampleSet;
 use crate::shading::solve::{solve_box_fixed, solve_spd};
@@ -111,23 +112,7 @@ pub fn fit_psi(samples: &SampleSet, weights: &[f32], opts: &FitOptions) -> Resul
         }
         .into());
     }
-    if weights.len() != n {
-        return Err(ShadingError::LengthMismatch {
-            fit: FIT,
-            what: "weights",
-            got: weights.len(),
-            expected: n,
-        }
-        .into());
-    }
-    if let Some(i) = weights.iter().position(|w| !(w.is_finite() && *w >= 0.0)) {
-        return Err(ShadingError::BadWeight {
-            fit: FIT,
-            index: i,
-            value: f64::from(weights[i]),
-        }
-        .into());
-    }
+    check_weights(FIT, weights, n)?;
     if !(samples.z_max > samples.z_min) {
         return Err(ShadingError::EmptyDepthRange {
             z_min: samples.z_min,
