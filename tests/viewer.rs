@@ -22,13 +22,18 @@ use cli::{ok, phantom, run};
 fn missing_tools(driver: &Path) -> Option<String> {
     let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
     if !Path::new(&chromium).exists() {
-        return Some(format!("no Chromium at {chromium} (apt-get install chromium)"));
+        return Some(format!(
+            "no Chromium at {chromium} (apt-get install chromium)"
+        ));
     }
     if Command::new("node").arg("--version").output().is_err() {
         return Some("no node (apt-get install nodejs npm)".into());
     }
     if !driver.join("node_modules/playwright-core").is_dir() {
-        return Some(format!("no playwright-core (npm ci --prefix {})", driver.display()));
+        return Some(format!(
+            "no playwright-core (npm ci --prefix {})",
+            driver.display()
+        ));
     }
     None
 }
@@ -138,7 +143,10 @@ fn the_viewer_draws_what_render_draws_and_navigates_inside_the_lumen() {
     let cam: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("case/truth/camera.json")).unwrap())
             .unwrap();
-    let size = [cam["width"].as_u64().unwrap(), cam["height"].as_u64().unwrap()];
+    let size = [
+        cam["width"].as_u64().unwrap(),
+        cam["height"].as_u64().unwrap(),
+    ];
     let views = shots["views"].as_array().unwrap();
     assert!(views.len() >= 4, "{shots}");
     let mut worst = f64::INFINITY;
@@ -148,7 +156,10 @@ fn the_viewer_draws_what_render_draws_and_navigates_inside_the_lumen() {
         assert_eq!(v["canvas"], serde_json::json!(size), "{v}");
         assert_eq!(v["css"], serde_json::json!(size), "{v}");
         assert_eq!(v["panelShown"], false, "{v}");
-        let p = psnr_srgb8(&dir.join("shots").join(image), &dir.join("views").join(image));
+        let p = psnr_srgb8(
+            &dir.join("shots").join(image),
+            &dir.join("views").join(image),
+        );
         eprintln!("{image}: {p:.2} dB against render");
         worst = worst.min(p);
     }
@@ -159,7 +170,10 @@ fn the_viewer_draws_what_render_draws_and_navigates_inside_the_lumen() {
     let f = |k: &str| nav[k].as_f64().unwrap();
     // W held 0.5 s at 5 mm/s: 2.5 mm straight ahead (keys are timed by their events; the
     // driver's own latency may add a little).
-    assert!(f("forwardAlongView") > 2.3 && f("forwardAlongView") < 3.5, "{nav}");
+    assert!(
+        f("forwardAlongView") > 2.3 && f("forwardAlongView") < 3.5,
+        "{nav}"
+    );
     assert!(f("forwardMoveMm") - f("forwardAlongView") < 0.05, "{nav}");
     // A 100 px drag to the right at 0.004 rad/px: 22.9 degrees to the right, in place.
     assert!((f("turnDeg") - 22.92).abs() < 0.5, "{nav}");
@@ -181,4 +195,19 @@ fn the_viewer_draws_what_render_draws_and_navigates_inside_the_lumen() {
     assert!(ap["endOffMm"].as_f64().unwrap() < 1e-6, "{ap}");
     assert!(ap["drawn"].as_f64().unwrap() > 1.0, "{ap}");
     assert!(f("poseBoxOffMm") < 1e-5, "{nav}");
+}
+
+#[test]
+fn view_of_a_folder_that_is_not_a_model_names_the_missing_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::create_dir(tmp.path().join("notes")).unwrap();
+    let o = run(&["view", "notes"], tmp.path());
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("model.json") && err.contains("not found"),
+        "{err}"
+    );
+    assert!(!tmp.path().join("viewer").exists());
 }

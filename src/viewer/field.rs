@@ -95,7 +95,8 @@ impl LumenField {
         if (0..3).any(|k| !(idx[k] >= 0.0 && idx[k] <= (self.dims[k] - 1) as f64)) {
             return 0.0;
         }
-        let i0: [usize; 3] = std::array::from_fn(|k| (idx[k].floor() as usize).min(self.dims[k].saturating_sub(2)));
+        let i0: [usize; 3] =
+            std::array::from_fn(|k| (idx[k].floor() as usize).min(self.dims[k].saturating_sub(2)));
         let f: [f64; 3] = std::array::from_fn(|k| idx[k] - i0[k] as f64);
         let at = |i: usize, j: usize, k: usize| {
             let (i, j, k) = (

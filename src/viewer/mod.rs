@@ -116,19 +116,27 @@ pub fn default_viewer_dir(model_dir: &Path) -> PathBuf {
 /// is replaced only with `opts.force`).
 pub fn write_viewer(model_dir: &Path, out: &Path, opts: &ViewerOptions) -> Result<ViewerSummary> {
     let model = Model::load(model_dir)?;
+    refuse_to_replace_the_model(model_dir, out)?;
+    // Before the slow part: an existing `out` is kept unless forced.
+    let dir = OutputDir::create(out, opts.force)?;
     let gpath = model_dir.join("airway.glb");
     let glb = read_glb(&gpath)?;
     let (welded, map) = glb.mesh.welded();
     if welded.positions.len() != model.scene.normals.len() {
         return Err(Error::invalid(&gpath, "the mesh changed while it was read"));
     }
-    let uvs = glb.uvs.ok_or_else(|| Error::invalid(&gpath, "no TEXCOORD_0"))?;
+    let uvs = glb
+        .uvs
+        .ok_or_else(|| Error::invalid(&gpath, "no TEXCOORD_0"))?;
     let png = glb
         .texture_png
         .ok_or_else(|| Error::invalid(&gpath, "no embedded base colour texture"))?;
     let texture = decode_png_bytes(&png, &gpath)?;
     let positions: Vec<[f32; 3]> = glb.mesh.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let normals: Vec<[f32; 3]> = map.iter().map(|&w| model.scene.normals[w as usize]).collect();
+    let normals: Vec<[f32; 3]> = map
+        .iter()
+        .map(|&w| model.scene.normals[w as usize])
+        .collect();
 
     let seg_path = model_dir.join("segmentation.nii.gz");
     let mask = read_lumen_mask(&seg_path)?;
@@ -150,7 +158,10 @@ pub fn write_viewer(model_dir: &Path, out: &Path, opts: &ViewerOptions) -> Resul
         }
     };
     let shading = ShadingData::of(&model.shading, opts.psi_lookup).ok_or_else(|| {
-        Error::invalid(model_dir.join("shading.json"), "the model's shading is missing")
+        Error::invalid(
+            model_dir.join("shading.json"),
+            "the model's shading is missing",
+        )
     })?;
     let (bin, sections) = pack(&Arrays {
         positions: &positions,
@@ -182,7 +193,6 @@ pub fn write_viewer(model_dir: &Path, out: &Path, opts: &ViewerOptions) -> Resul
         sections,
     };
     let js = data_js(&meta, &bin)?;
-    let dir = OutputDir::create(out, opts.force)?;
     let mut bytes = 0u64;
     for (name, text) in ASSETS
         .iter()
@@ -203,6 +213,21 @@ pub fn write_viewer(model_dir: &Path, out: &Path, opts: &ViewerOptions) -> Resul
     })
 }
 
+/// `out` must not be the model folder or hold it (`--force` would replace the model).
+fn refuse_to_replace_the_model(model_dir: &Path, out: &Path) -> Result<()> {
+    // A folder that does not exist yet cannot hold the model.
+    let (Ok(model), Ok(out_abs)) = (model_dir.canonicalize(), out.canonicalize()) else {
+        return Ok(());
+    };
+    if model.starts_with(&out_abs) {
+        return Err(Error::invalid(
+            out,
+            "is (or holds) the model folder; choose another --out for the viewer",
+        ));
+    }
+    Ok(())
+}
+
 /// The model folder's own name ("model" for "bronchosim-demo/model/").
 fn model_name(dir: &Path) -> String {
     std::path::absolute(dir)
@@ -216,7 +241,15 @@ pub fn open_in_browser(index: &Path) -> std::result::Result<(), String> {
     let (program, args): (&str, Vec<&std::ffi::OsStr>) = if cfg!(target_os = "macos") {
         ("open", vec![index.as_os_str()])
     } else if cfg!(target_os = "windows") {
-        ("cmd", vec!["/C".as_ref(), "start".as_ref(), "".as_ref(), index.as_os_str()])
+        (
+            "cmd",
+            vec![
+                "/C".as_ref(),
+                "start".as_ref(),
+                "".as_ref(),
+                index.as_os_str(),
+            ],
+        )
     } else {
         ("xdg-open", vec![index.as_os_str()])
     };
@@ -227,5 +260,10 @@ pub fn open_in_browser(index: &Path) -> std::result::Result<(), String> {
         .stderr(std::process::Stdio::null())
         .spawn()
         .map(|_| ())
-        .map_err(|e| format!("could not start {program} ({e}): open {} yourself", index.display()))
+        .map_err(|e| {
+            format!(
+                "could not start {program} ({e}): open {} yourself",
+                index.display()
+            )
+        })
 }

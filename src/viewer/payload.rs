@@ -256,8 +256,14 @@ pub fn pack(arrays: &Arrays) -> (Vec<u8>, Vec<Section>) {
         });
     };
     let f32s = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
-    push("positions", &mut f32s(arrays.positions.as_flattened()).into_iter());
-    push("normals", &mut f32s(arrays.normals.as_flattened()).into_iter());
+    push(
+        "positions",
+        &mut f32s(arrays.positions.as_flattened()).into_iter(),
+    );
+    push(
+        "normals",
+        &mut f32s(arrays.normals.as_flattened()).into_iter(),
+    );
     push("uvs", &mut f32s(arrays.uvs.as_flattened()).into_iter());
     let idx: Vec<u8> = arrays
         .indices
@@ -320,7 +326,9 @@ mod tests {
     fn texture_deltas_undo_to_the_codes() {
         let mut f = Frame::new(3, 2);
         let lut = crate::image::srgb::srgb8_to_linear_lut();
-        let codes = [10u8, 200, 30, 0, 255, 7, 99, 98, 97, 1, 2, 3, 250, 5, 128, 64, 32, 16];
+        let codes = [
+            10u8, 200, 30, 0, 255, 7, 99, 98, 97, 1, 2, 3, 250, 5, 128, 64, 32, 16,
+        ];
         for (v, c) in f.rgb.iter_mut().zip(codes) {
             *v = lut[c as usize];
         }
