@@ -48,7 +48,9 @@ pub fn spot_falloff(cos_theta: f64, inner: f64, outer: f64) -> f64 {
 pub fn fit_spot(light: &CalibratedModel, albedo_scale: f32, colour_balance: [f32; 3]) -> SpotFit {
     // s beyond the fit's edge is held constant (as new views hold it), up to 89 degrees.
     let edge = light.theta_edge_deg().min(89.0).to_radians();
-    let thetas: Vec<f64> = (0..=90).map(|i| 89f64.to_radians() * i as f64 / 90.0).collect();
+    let thetas: Vec<f64> = (0..=90)
+        .map(|i| 89f64.to_radians() * i as f64 / 90.0)
+        .collect();
     let s: Vec<f64> = thetas.iter().map(|t| light.s(t.cos())).collect();
     let rms = |inner: f64, outer: f64| {
         let e: f64 = thetas
@@ -172,7 +174,8 @@ pub fn add_scope_light(
     {
         scene.push(json!(node_index));
     }
-    let js = serde_json::to_vec(&root).map_err(|e| Error::invalid(path, format!("glTF JSON: {e}")))?;
+    let js =
+        serde_json::to_vec(&root).map_err(|e| Error::invalid(path, format!("glTF JSON: {e}")))?;
     crate::io::atomic::write_bytes_atomic(path, &join_glb(js, bin))
 }
 
@@ -211,9 +214,13 @@ fn split_glb(b: &[u8]) -> std::result::Result<(Value, Vec<u8>), String> {
     let mut at = 12;
     while at + 8 <= b.len() {
         let len = u32_at(at)?;
-        let data = b.get(at + 8..at + 8 + len).ok_or("a GLB chunk runs past the end")?;
+        let data = b
+            .get(at + 8..at + 8 + len)
+            .ok_or("a GLB chunk runs past the end")?;
         match &b[at + 4..at + 8] {
-            b"JSON" => js = Some(serde_json::from_slice(data).map_err(|e| format!("glTF JSON: {e}"))?),
+            b"JSON" => {
+                js = Some(serde_json::from_slice(data).map_err(|e| format!("glTF JSON: {e}"))?)
+            }
             b"BIN\0" => bin = data.to_vec(),
             _ => {}
         }
@@ -280,7 +287,10 @@ mod tests {
         assert!(fit.falloff_rms < 1e-9, "{fit:?}");
         // A wider, flat-topped profile moves the cone out and opens an inner angle.
         let wide = fit_spot(&light(vec![1.0, 1.0, 1.0, 0.2]), 0.5, [1.0; 3]);
-        assert!(wide.inner > 5f64.to_radians() && wide.outer > fit.outer, "{wide:?}");
+        assert!(
+            wide.inner > 5f64.to_radians() && wide.outer > fit.outer,
+            "{wide:?}"
+        );
     }
 
     #[test]

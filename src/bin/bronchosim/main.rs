@@ -191,8 +191,8 @@ fn view(a: ViewArgs) -> anyhow::Result<String> {
         force: a.force,
         ..Default::default()
     };
-    let summary =
-        write_viewer(&a.model, &out, &opts).with_context(|| format!("view {}", a.model.display()))?;
+    let summary = write_viewer(&a.model, &out, &opts)
+        .with_context(|| format!("view {}", a.model.display()))?;
     if a.open {
         if let Err(e) = open_in_browser(&summary.out.join("index.html")) {
             eprintln!("warning: {e}");

@@ -59,9 +59,11 @@ impl AutoExposure {
         let slope = sxy / sxx;
         let a = my - slope * mx;
         let rss: f64 = pts.iter().map(|(x, y)| (y - a - slope * x).powi(2)).sum();
-        let (lo, hi) = pts.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), (x, _)| {
-            (lo.min(x.exp()), hi.max(x.exp()))
-        });
+        let (lo, hi) = pts
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), (x, _)| {
+                (lo.min(x.exp()), hi.max(x.exp()))
+            });
         Some(AutoExposure {
             log_gain_at_unit_light: a,
             slope,
@@ -120,7 +122,11 @@ mod tests {
         let ae = AutoExposure::fit(&gains, &light).unwrap();
         assert!((ae.slope + 0.8).abs() < 0.02, "slope {}", ae.slope);
         assert!((ae.log_gain_at_unit_light - 0.3f64.ln()).abs() < 0.03);
-        assert!((ae.rms_log_residual - 0.03).abs() < 0.006, "{}", ae.rms_log_residual);
+        assert!(
+            (ae.rms_log_residual - 0.03).abs() < 0.006,
+            "{}",
+            ae.rms_log_residual
+        );
         assert_eq!(ae.frames_used, 200);
         ae.validate().unwrap();
         // Inside the range: the law; outside: clamped.
