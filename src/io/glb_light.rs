@@ -276,11 +276,13 @@ mod tests {
     #[test]
     fn a_light_that_is_a_spot_is_fitted_exactly() {
         // s = (1 - t)^2 with t = (1 - cos theta) / (1 - cos 60deg) is the extension's falloff
-        // with inner 0 and outer 60 degrees; rho linear in gamma (Lambert): rho_R = 2 gamma
-        // = pi K gamma with K = 2 / pi, so the intensity is pi K / albedo_scale = 4.
+        // with inner 0 and outer 60 degrees; rho linear in gamma (Lambert): rho_R = 2 gamma.
+        // The engine shades texture / pi x I cos(gamma) / z^2 with texture = albedo x
+        // albedo_scale, so I = pi x 2 / albedo_scale = 4 pi.
         let l = light(vec![1.0, 0.0, 0.0]);
         let fit = fit_spot(&l, 0.5, [1.0, 1.0, 1.0]);
-        assert!((fit.intensity - 4.0).abs() < 1e-9, "{fit:?}");
+        let want = 4.0 * std::f64::consts::PI;
+        assert!((fit.intensity - want).abs() < 1e-9, "{fit:?}");
         assert!((fit.color[1] - 0.5).abs() < 1e-9 && (fit.color[2] - 0.25).abs() < 1e-9);
         assert!(fit.inner.abs() < 1e-9, "{fit:?}");
         assert!((fit.outer.to_degrees() - 60.0).abs() < 0.01, "{fit:?}");
