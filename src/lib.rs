@@ -19,6 +19,7 @@ pub mod render;
 pub mod rng;
 pub mod shading;
 pub mod texture;
+pub mod viewer;
 pub mod volume;
 pub mod workflow;
 

@@ -253,6 +253,7 @@ fn mip_mapping_reduces_aliasing_on_distant_grazing_walls() {
         supersample,
         gain: 1.0,
         albedo_only: false,
+        auto_exposure: false,
     };
     let reference = render_view(&inputs(&fx.plain), &cam, &pose, &o(false, 8)).unwrap();
     let no_mip = render_view(&inputs(&fx.plain), &cam, &pose, &o(false, 1)).unwrap();
@@ -491,6 +492,7 @@ fn calibrated_new_views_reflect_their_own_light() {
         ambient: Some(vec![[0.0; 3]]),
         interreflection: Some(kappa),
         frame_light: Some(vec![0.0]),
+        auto_exposure: None,
         rms_residual: [0.0; 3],
         samples_used: 0,
     };

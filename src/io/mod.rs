@@ -8,6 +8,7 @@ pub mod ct;
 pub mod dicom;
 pub mod frame_source;
 pub mod glb_import;
+pub mod glb_light;
 pub mod image_mask;
 pub mod mesh_export;
 pub mod nifti;

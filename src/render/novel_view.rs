@@ -12,7 +12,7 @@ use crate::math::Affine;
 use crate::mesh::GeometryError;
 use crate::raycast::Scene;
 use crate::shading::paper::PsiLookup;
-use crate::shading::{FittedShading, ShadingKind};
+use crate::shading::{FittedShading, ShadingKind, LUMA};
 use crate::texture::atlas::Atlas;
 use crate::Result;
 
@@ -58,6 +58,11 @@ pub struct RenderOptions {
     pub gain: f32,
     /// Write the texture alone (the relative albedo the shading multiplies), unshaded.
     pub albedo_only: bool,
+    /// Expose as the patient's scope would: multiply by the gain its auto-exposure (learnt by
+    /// `build`, [`crate::shading::calibrated::AutoExposure`]) picks for the view's mean
+    /// luminance. Calibrated light only; ignored by the paper's Psi (each Psi holds its frame's
+    /// gain) and by models built without it.
+    pub auto_exposure: bool,
 }
 
 impl Default for RenderOptions {
@@ -68,6 +73,7 @@ impl Default for RenderOptions {
             mipmap: true,
             gain: 1.0,
             albedo_only: false,
+            auto_exposure: false,
         }
     }
 }
@@ -253,6 +259,40 @@ pub fn render_view_with(
         );
     if !opts.albedo_only {
         shade.finish(&mut frame, &mask, opts.gain);
+        if opts.auto_exposure {
+            apply_auto_exposure(inputs, &mut frame, &mask, opts.gain);
+        }
     }
     Ok((frame, mask))
+}
+
+/// The auto-exposure gain of a view rendered at exposure `gain` (the mean luminance over its
+/// surface pixels at the reference gain decides it); 1 without a learnt auto-exposure.
+pub fn auto_exposure_gain(inputs: &RenderInputs, frame: &Frame, mask: &[bool], gain: f32) -> f64 {
+    let ae = match (inputs.kind, &inputs.shading.calibrated) {
+        (ShadingKind::Calibrated, Some(c)) => c.auto_exposure.as_ref(),
+        _ => None,
+    };
+    let Some(ae) = ae.filter(|_| gain > 0.0) else {
+        return 1.0;
+    };
+    let (sum, hits) = frame
+        .rgb
+        .chunks_exact(3)
+        .zip(mask)
+        .filter(|(_, &m)| m)
+        .fold((0.0f64, 0usize), |(s, n), (px, _)| {
+            let lum: f64 = (0..3).map(|c| LUMA[c] * f64::from(px[c])).sum();
+            (s + lum, n + 1)
+        });
+    let light = sum / hits.max(1) as f64 / f64::from(gain);
+    ae.gain(light)
+}
+
+/// Multiply `frame` by [`auto_exposure_gain`].
+fn apply_auto_exposure(inputs: &RenderInputs, frame: &mut Frame, mask: &[bool], gain: f32) {
+    let g = auto_exposure_gain(inputs, frame, mask, gain) as f32;
+    for v in &mut frame.rgb {
+        *v *= g;
+    }
 }

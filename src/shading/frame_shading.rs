@@ -146,6 +146,7 @@ mod tests {
             ambient: Some(vec![[0.0; 3], [0.1, 0.2, 0.3]]),
             interreflection: None,
             frame_light: None,
+            auto_exposure: None,
             rms_residual: [0.0; 3],
             samples_used: 0,
         };

@@ -1,12 +1,13 @@
 //! `bronchosim demo`: the embedded default. Writes the phantom case (CT, video frames, poses,
 //! camera, and the truth), builds the model from it (the report scores new views against the
 //! truth views, Fig. 4), renders the truth views with `render` and scores them next to the
-//! paper's method and both baselines.
+//! paper's method and both baselines, and writes the browser viewer (`bronchosim view`).
 
 use crate::io::output_dir::OutputDir;
 use crate::model::ModelManifest;
 use crate::phantom::{write_phantom_case, PhantomOptions};
 use crate::render::MethodScore;
+use crate::viewer::{write_viewer, ViewerOptions};
 use crate::workflow::build::{build_model, BuildOptions};
 use crate::workflow::render::{render_command, RenderCommandOptions};
 use crate::workflow::truth_eval::evaluate_with_baselines;
@@ -29,6 +30,8 @@ pub struct DemoSummary {
     pub views: PathBuf,
     /// Their scores next to the paper's method and both baselines.
     pub scores: Vec<MethodScore>,
+    /// The browser viewer of the model (`bronchosim view`).
+    pub viewer: PathBuf,
 }
 
 /// Run the demo into `out` (atomically; an existing `out` is replaced only with `force`).
@@ -57,11 +60,13 @@ pub fn run_demo(
     };
     render_command(&model, &truth.join("views.json"), &views, &render)?;
     let scores = evaluate_with_baselines(&views, &truth, &model, Some(&case))?;
+    write_viewer(&model, &dir.join("viewer"), &ViewerOptions::default())?;
     let out = dir.commit()?;
     Ok(DemoSummary {
         case: out.join("case"),
         model: out.join("model"),
         views: out.join("views"),
+        viewer: out.join("viewer"),
         out,
         manifest,
         phantom_seconds,

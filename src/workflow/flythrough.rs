@@ -50,6 +50,9 @@ pub struct FlythroughOptions {
     pub look_ahead_mm: f64,
     /// Largest distance (mm) from the first/last training camera to the airway mask.
     pub max_snap_mm: f64,
+    /// Expose each frame with the scope's learnt auto-exposure (calibrated light; see
+    /// [`RenderOptions::auto_exposure`]) rather than at the fixed reference gain.
+    pub auto_exposure: bool,
     /// Replace an existing output folder.
     pub force: bool,
     /// No progress bar.
@@ -67,6 +70,7 @@ impl Default for FlythroughOptions {
             smoothing_mm: 3.0,
             look_ahead_mm: 8.0,
             max_snap_mm: 3.0,
+            auto_exposure: true,
             force: false,
             quiet: false,
         }
@@ -111,20 +115,16 @@ pub fn flythrough(
     }
     let model = Model::load(model_dir)?;
     let seg_path = model_dir.join("segmentation.nii.gz");
-    let mask = read_nifti(&seg_path)?.map(|v| u8::from(v > 0.5));
-    let vps = &model.shading.viewpoints;
-    let first = camera_centre(&Affine::from_row_slice(&vps[0].camera_to_world));
-    let last = camera_centre(&Affine::from_row_slice(&vps[vps.len() - 1].camera_to_world));
-    let first_pose = Affine::from_row_slice(&vps[0].camera_to_world);
-    let down0 = Vector3::new(first_pose[(0, 1)], first_pose[(1, 1)], first_pose[(2, 1)]);
+    let mask = read_lumen_mask(&seg_path)?;
     let (poses, path_length_mm, min_clearance_mm) =
-        flythrough_poses(&mask, &seg_path, first, last, down0, opts)?;
+        training_path_poses(&model, &mask, &seg_path, opts)?;
 
     let dir = OutputDir::create(out, opts.force)?;
     let camera = opts.camera.unwrap_or(model.manifest.camera);
     let rays = ViewRays::new(&camera, 1)?;
     let ropts = RenderOptions {
         psi_lookup: opts.psi_lookup,
+        auto_exposure: opts.auto_exposure,
         ..Default::default()
     };
     let inputs = model.render_inputs();
@@ -161,6 +161,28 @@ pub fn flythrough(
         video_note,
         render_seconds,
     })
+}
+
+/// The model's airway mask (segmentation.nii.gz at `path`) as 0/1 voxels.
+pub fn read_lumen_mask(path: &Path) -> Result<Volume<u8>> {
+    Ok(read_nifti(path)?.map(|v| u8::from(v > 0.5)))
+}
+
+/// The flythrough poses of `model` through `mask` (its segmentation, read from `mask_path`):
+/// from the first fitted viewpoint to the last, image "down" starting as the first one's.
+/// Also the path length (mm) and the smallest wall clearance of a camera centre (mm).
+pub fn training_path_poses(
+    model: &Model,
+    mask: &Volume<u8>,
+    mask_path: &Path,
+    opts: &FlythroughOptions,
+) -> Result<(Vec<Affine>, f64, f64)> {
+    let vps = &model.shading.viewpoints;
+    let first_pose = Affine::from_row_slice(&vps[0].camera_to_world);
+    let first = camera_centre(&first_pose);
+    let last = camera_centre(&Affine::from_row_slice(&vps[vps.len() - 1].camera_to_world));
+    let down0 = Vector3::new(first_pose[(0, 1)], first_pose[(1, 1)], first_pose[(2, 1)]);
+    flythrough_poses(mask, mask_path, first, last, down0, opts)
 }
 
 /// The flythrough camera poses (camera→world) through `mask` (nonzero = lumen; `mask_path`

@@ -303,6 +303,12 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
         m.counts.chart_texels,
         100.0 * m.counts.covered_texels as f64 / m.counts.chart_texels.max(1) as f64
     );
+    // The viewer sits beside the model folder (`bronchosim view`'s default, and the demo's).
+    html.push_str(
+        "<p><b>Fly through this model</b> in a browser, lit as the bronchoscope lights it: \
+         <a href=\"../viewer/index.html\">../viewer/index.html</a> (written by <code>bronchosim \
+         demo</code>, or by <code>bronchosim view MODEL</code> for any model).</p>",
+    );
     shading_section(&mut html, m, inputs.shading.calibrated.as_ref(), tmp.path())?;
     // Fit quality over the video.
     html.push_str("<h2>Fit quality of Psi over the video</h2>");

@@ -30,7 +30,8 @@ impl DemoSummary {
         let m = &self.manifest;
         format!(
             "phantom case {} ({} frames, {:.1} s)\nmodel {} in {:.1} s: {} triangles, atlas {}x{}, {:.0}% of chart texels seen, mean R² of Psi {:.3}, shading {}{}\nreport {}\n\
-             truth views rendered into {}; scores (PSNR dB / SSIM, same pixels, per-channel gain):\n{}\n",
+             truth views rendered into {}; scores (PSNR dB / SSIM, same pixels, per-channel gain):\n{}\n\
+             fly through the model: open {} in a browser (WebGL2)\n",
             self.case.display(),
             m.counts.frames,
             self.phantom_seconds,
@@ -45,7 +46,8 @@ impl DemoSummary {
             held_out_text(m),
             self.model.join("report.html").display(),
             self.views.display(),
-            scores_text(&self.scores)
+            scores_text(&self.scores),
+            self.viewer.join("index.html").display(),
         )
     }
 }

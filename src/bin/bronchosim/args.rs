@@ -63,6 +63,9 @@ pub enum Command {
     /// Score rendered views against reference images: PSNR and SSIM on the pixels both cover,
     /// after one least-squares gain per channel over all views.
     Evaluate(EvaluateArgs),
+    /// Write a self-contained browser viewer (index.html, works from file://) to fly through
+    /// the model, lit as the bronchoscope lights it.
+    View(ViewArgs),
 }
 
 /// The arguments of `bronchosim inspect`.
@@ -291,6 +294,11 @@ pub struct RenderArgs {
     /// Write the texture alone (the fused albedo, unshaded), e.g. to inspect the texture.
     #[arg(long)]
     pub albedo_only: bool,
+    /// Expose each view as the patient's scope would: the gain its auto-exposure (learnt by
+    /// `build` from the video's gains) picks for the view's brightness, instead of the fixed
+    /// reference gain (calibrated light only).
+    #[arg(long)]
+    pub auto_exposure: bool,
     /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,
@@ -310,7 +318,31 @@ pub struct FlythroughArgs {
     /// Frame rate of the video (frames per second).
     #[arg(long, default_value_t = FlythroughOptions::default().fps)]
     pub fps: u32,
+    /// Render every frame at the fixed reference gain instead of with the scope's learnt
+    /// auto-exposure.
+    #[arg(long)]
+    pub fixed_exposure: bool,
     /// Replace the output folder if it exists.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// The arguments of `bronchosim view`.
+#[derive(Args, Debug)]
+pub struct ViewArgs {
+    /// The model folder (from `bronchosim build`).
+    pub model: PathBuf,
+    /// Output folder (default: `viewer` beside the model folder, where its report links).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Open the viewer in the desktop's browser afterwards.
+    #[arg(long)]
+    pub open: bool,
+    /// For a model shaded with the paper's Psi: nearest (the paper) or blend (the k nearest
+    /// viewpoints, as `render` does by default).
+    #[arg(long, value_enum, default_value_t = PsiLookupKind::Blend)]
+    pub shading: PsiLookupKind,
+    /// Replace an existing output folder.
     #[arg(long)]
     pub force: bool,
 }

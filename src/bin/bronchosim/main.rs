@@ -6,7 +6,7 @@ mod args;
 use anyhow::Context;
 use args::{
     BuildArgs, Cli, Command, ConvertArgs, DemoArgs, EvaluateArgs, FlythroughArgs, InspectArgs,
-    PhantomArgs, RegisterArgs, RenderArgs, SegmentArgs,
+    PhantomArgs, RegisterArgs, RenderArgs, SegmentArgs, ViewArgs,
 };
 use bronchosim::inspect::{inspect, InspectOptions};
 use bronchosim::math::Point3;
@@ -41,6 +41,7 @@ fn run(command: Command, quiet: bool) -> anyhow::Result<String> {
         Command::Render(a) => render(a),
         Command::Flythrough(a) => fly(a, quiet),
         Command::Evaluate(a) => evaluate(a),
+        Command::View(a) => view(a),
     }
 }
 
@@ -186,6 +187,7 @@ fn render(a: RenderArgs) -> anyhow::Result<String> {
             psi_lookup: PsiLookup::of_kind(a.shading, a.k),
             supersample: a.supersample.max(1),
             albedo_only: a.albedo_only,
+            auto_exposure: a.auto_exposure,
             ..Default::default()
         },
         force: a.force,
@@ -199,12 +201,31 @@ fn fly(a: FlythroughArgs, quiet: bool) -> anyhow::Result<String> {
     let opts = FlythroughOptions {
         frames: a.frames,
         fps: a.fps,
+        auto_exposure: !a.fixed_exposure,
         force: a.force,
         quiet,
         ..Default::default()
     };
     let summary = flythrough(&a.model, &a.out, &opts)
         .with_context(|| format!("flythrough {}", a.model.display()))?;
+    Ok(summary.to_text())
+}
+
+fn view(a: ViewArgs) -> anyhow::Result<String> {
+    use bronchosim::viewer::{default_viewer_dir, open_in_browser, write_viewer, ViewerOptions};
+    let out = a.out.unwrap_or_else(|| default_viewer_dir(&a.model));
+    let opts = ViewerOptions {
+        psi_lookup: PsiLookup::of_kind(a.shading, PsiLookup::DEFAULT_K),
+        force: a.force,
+        ..Default::default()
+    };
+    let summary = write_viewer(&a.model, &out, &opts)
+        .with_context(|| format!("view {}", a.model.display()))?;
+    if a.open {
+        if let Err(e) = open_in_browser(&summary.out.join("index.html")) {
+            eprintln!("warning: {e}");
+        }
+    }
     Ok(summary.to_text())
 }
 

@@ -359,6 +359,7 @@ fn model_of(
             .interreflection
             .then(|| std::array::from_fn(|c| p[lay.k_off() + c])),
         frame_light: lay.interreflection.then(|| frame_light.to_vec()),
+        auto_exposure: None,
         rms_residual: rms,
         samples_used: n,
     }

@@ -8,6 +8,7 @@
 //! known albedo (the build's refinements against a fused texture). [`plots`] draws the light.
 
 pub mod chroma_albedo;
+pub mod exposure;
 pub mod fit;
 pub mod model;
 mod moments;
@@ -17,6 +18,7 @@ pub mod samples;
 mod solver;
 
 pub use chroma_albedo::refit_with_chroma_albedo;
+pub use exposure::AutoExposure;
 pub use fit::{
     fit_calibrated, fit_calibrated_with_albedo, CalibratedFit, CalibratedOptions, CalibratedReport,
 };

@@ -13,6 +13,7 @@
 use crate::shading::frame_shading::LUMA;
 use serde::{Deserialize, Serialize};
 
+use super::exposure::AutoExposure;
 use crate::shading::bernstein::bernstein_eval;
 
 /// The fitted calibrated light model, as stored under "calibrated" in `shading.json`.
@@ -44,6 +45,10 @@ pub struct CalibratedModel {
     /// intensity at that frame's gain), when the fit had the inter-reflection term.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frame_light: Option<Vec<f64>>,
+    /// The scope's auto-exposure learnt from the gains (see [`AutoExposure`]); absent in models
+    /// built before it was fitted, or when the video's frames did not vary in brightness.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub auto_exposure: Option<AutoExposure>,
     /// Weighted RMS residual per channel over the fitted samples (linear intensity), with the
     /// final fit weights (density x robust).
     pub rms_residual: [f64; 3],
@@ -226,6 +231,9 @@ impl CalibratedModel {
                 ));
             }
         }
+        if let Some(ae) = &self.auto_exposure {
+            ae.validate()?;
+        }
         if self.interreflection.is_some() != self.frame_light.is_some() {
             return Err(
                 "calibrated.interreflection and calibrated.frame_light go together".to_string(),
@@ -250,6 +258,7 @@ mod tests {
             ambient: Some(vec![[0.0; 3], [0.01, 0.02, 0.03]]),
             interreflection: None,
             frame_light: None,
+            auto_exposure: None,
             rms_residual: [0.0; 3],
             samples_used: 0,
         };
@@ -288,6 +297,7 @@ mod tests {
             ambient: Some(ambient),
             interreflection: Some(kappa),
             frame_light: Some(light.to_vec()),
+            auto_exposure: None,
             rms_residual: [0.0; 3],
             samples_used: 0,
         };

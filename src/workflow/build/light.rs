@@ -15,7 +15,7 @@ use super::options::BuildOptions;
 use super::scene::BuildScene;
 use crate::model::manifest::LightFitSettings;
 use crate::shading::calibrated::{
-    density_weights_3d, fit_calibrated, refit_with_chroma_albedo, CalibratedModel,
+    density_weights_3d, fit_calibrated, refit_with_chroma_albedo, AutoExposure, CalibratedModel,
     CalibratedOptions,
 };
 use crate::shading::{ShadingKind, WeightOptions};
@@ -73,6 +73,8 @@ pub fn calibrated_light(
         refit_light_against_texture(&consensus, &mut model, &samples, &density, &cal_opts)?;
         correct_gains(&consensus, &mut model)?;
     }
+    // The scope's auto-exposure, from the finished gains (used by new views that ask for it).
+    model.auto_exposure = AutoExposure::fit(&model.gains, &samples.pooled.frame_light);
     let settings = LightFitSettings {
         rho_degree: cal_opts.rho_degree,
         s_degree: cal_opts.s_degree,

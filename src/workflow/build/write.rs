@@ -73,6 +73,14 @@ fn write_model_files(out_dir: &OutputDir, built: &BuiltModel) -> Result<ModelMan
     let atlas = &scene.atlas;
     let albedo = &built.textures.albedo;
     let tex = write_texture_outputs(out_dir.path(), atlas, &albedo.rgb, &albedo.covered)?;
+    // The scope's light in airway.glb for engines (KHR_lights_punctual; issue 19).
+    crate::io::glb_light::add_scope_light(
+        &out_dir.join("airway.glb"),
+        built.shading,
+        &scene.case.camera,
+        tex.albedo_scale,
+        albedo.colour_balance,
+    )?;
     let paper_texture = match &built.textures.paper {
         Some(paper) => {
             let img = encode_albedo(&paper.rgb, atlas.width, atlas.height, &paper.covered)?;
