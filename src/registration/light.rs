@@ -138,6 +138,7 @@ mod tests {
             frame_light: None,
             rms_residual: [0.0; 3],
             samples_used: 0,
+            auto_exposure: None,
         }
     }
 

@@ -127,7 +127,7 @@ pub fn registration_report(reg: &PoseRegistration, case_dir: &Path) -> String {
 }
 
 /// An inline SVG line plot of `values` over the frame index.
-fn line_plot(values: &[f64], label: &str, colour: &str) -> String {
+pub(crate) fn line_plot(values: &[f64], label: &str, colour: &str) -> String {
     let (w, h, pad) = (640.0, 160.0, 30.0);
     let top = values.iter().cloned().fold(0.0_f64, f64::max).max(1e-9);
     let n = values.len().max(2) as f64 - 1.0;

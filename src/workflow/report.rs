@@ -5,6 +5,7 @@
 
 use crate::image::Frame;
 use crate::io::png::write_png_srgb8;
+use crate::model::registration::PoseRegistration;
 use crate::model::ModelManifest;
 use crate::raycast::{GBuffer, RayTable};
 use crate::shading::calibrated::plots::{plot_gains, plot_light_profile, plot_rho};
@@ -13,6 +14,7 @@ use crate::shading::paper::plots::{plot_psi_slices, plot_samples_density};
 use crate::shading::paper::PsiModel;
 use crate::shading::{FittedShading, FrameShading, SampleSet};
 use crate::workflow::new_views_figure::NewViewsFigure;
+use crate::workflow::register::line_plot;
 use crate::{Error, Result};
 use base64::Engine;
 use std::fmt::Write as _;
@@ -273,6 +275,79 @@ fn new_views_section(html: &mut String, fig: &NewViewsFigure, tmp: &Path) -> Res
     Ok(())
 }
 
+/// Paper Fig. 2 and Fig. 3 for the report's frames: the samples, Psi's fit, the frame, its
+/// predicted shading and the texture it gives.
+fn frame_figures(html: &mut String, inputs: &ReportInputs, tmp: &Path) -> Result<()> {
+    let m = inputs.manifest;
+    // Fig. 2 and Fig. 3 for a few frames.
+    html.push_str("<h2>Shading fit (paper Fig. 2) and de-lighting (paper Fig. 3)</h2>");
+    // cos theta of every pixel's ray (the calibrated light's angular profile).
+    let cos_theta = cos_theta_of(&RayTable::new(&m.camera));
+    for f in inputs.frames {
+        let _ = write!(html, "<h3>Frame {}</h3>", f.index);
+        let dens = tmp.join(format!("dens{}.png", f.index));
+        plot_samples_density(&f.samples, &dens)?;
+        let mut zs: Vec<f32> = f.samples.z.clone();
+        let k = zs.len() / 2;
+        let zmed = *zs.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1 as f64;
+        let slices = [
+            (zmed - 4.0, zmed - 2.0),
+            (zmed - 1.0, zmed + 1.0),
+            (zmed + 2.0, zmed + 4.0),
+        ];
+        let fit = tmp.join(format!("fit{}.png", f.index));
+        plot_psi_slices(&f.samples, &f.psi, &slices, &fit)?;
+        let read = |p: &Path| std::fs::read(p).map_err(|e| Error::io(p, e));
+        let shading = inputs
+            .shading
+            .frame_shaders(m.shading_model)?
+            .frame_shading(f.index);
+        let (shade, tex) = shading_and_texture(f, shading, &cos_theta);
+        let name = match shading {
+            FrameShading::Paper(_) => "Psi(gamma, z)",
+            FrameShading::Calibrated { .. } => "g_f rho(gamma) s(theta) / z²",
+        };
+        let _ = write!(
+            html,
+            "<figure>{}<figcaption>(a) samples in (gamma, z): uneven density</figcaption></figure>\
+             <figure>{}<figcaption>(b) Psi against the samples in depth slices</figcaption></figure><br>\
+             <figure>{}<figcaption>frame</figcaption></figure>\
+             <figure>{}<figcaption>predicted shading {name}</figcaption></figure>\
+             <figure>{}<figcaption>extracted texture (frame / shading)</figcaption></figure>\
+             <p>R² {:.3} / {:.3} / {:.3}; samples used {}; excluded: no hit {}, grazing {}, saturated {}, dark {}.</p>",
+            img_tag(&read(&dens)?, "Fig. 2a", Some(420)),
+            img_tag(&read(&fit)?, "Fig. 2b", Some(420)),
+            img_tag(&png_of(&f.frame, tmp, "frame.png")?, "frame", Some(256)),
+            img_tag(&png_of(&shade, tmp, "shade.png")?, "shading", Some(256)),
+            img_tag(&png_of(&tex, tmp, "tex.png")?, "texture", Some(256)),
+            m.fit_quality[f.index].r2[0],
+            m.fit_quality[f.index].r2[1],
+            m.fit_quality[f.index].r2[2],
+            f.samples.len(),
+            f.samples.excluded.no_hit,
+            f.samples.excluded.grazing,
+            f.samples.excluded.saturated,
+            f.samples.excluded.dark,
+        );
+    }
+    Ok(())
+}
+
+/// The registration's corrections over the video and its rounds (issue 16).
+fn registration_section(html: &mut String, reg: &PoseRegistration) {
+    html.push_str(&format!(
+        "<h2>Registration of the poses to the CT</h2><p>{} rounds; {} of {} frames left out \
+         (their pose could not be trusted). Each frame's correction of its given pose:</p>",
+        reg.rounds.len(),
+        reg.left_out,
+        reg.frames.len()
+    ));
+    let mm: Vec<f64> = reg.frames.iter().map(|f| f.correction_mm).collect();
+    let deg: Vec<f64> = reg.frames.iter().map(|f| f.correction_deg).collect();
+    html.push_str(&line_plot(&mm, "camera centre moved (mm)", "#1f77b4"));
+    html.push_str(&line_plot(&deg, "camera turned (degrees)", "#d62728"));
+}
+
 /// Write report.html.
 pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
     let m = inputs.manifest;
@@ -322,56 +397,9 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
         ],
         (0.0, 1.0),
     ));
-    // Fig. 2 and Fig. 3 for a few frames.
-    html.push_str("<h2>Shading fit (paper Fig. 2) and de-lighting (paper Fig. 3)</h2>");
-    // cos theta of every pixel's ray (the calibrated light's angular profile).
-    let cos_theta = cos_theta_of(&RayTable::new(&m.camera));
-    for f in inputs.frames {
-        let _ = write!(html, "<h3>Frame {}</h3>", f.index);
-        let dens = tmp.path().join(format!("dens{}.png", f.index));
-        plot_samples_density(&f.samples, &dens)?;
-        let mut zs: Vec<f32> = f.samples.z.clone();
-        let k = zs.len() / 2;
-        let zmed = *zs.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1 as f64;
-        let slices = [
-            (zmed - 4.0, zmed - 2.0),
-            (zmed - 1.0, zmed + 1.0),
-            (zmed + 2.0, zmed + 4.0),
-        ];
-        let fit = tmp.path().join(format!("fit{}.png", f.index));
-        plot_psi_slices(&f.samples, &f.psi, &slices, &fit)?;
-        let read = |p: &Path| std::fs::read(p).map_err(|e| Error::io(p, e));
-        let shading = inputs
-            .shading
-            .frame_shaders(m.shading_model)?
-            .frame_shading(f.index);
-        let (shade, tex) = shading_and_texture(f, shading, &cos_theta);
-        let name = match shading {
-            FrameShading::Paper(_) => "Psi(gamma, z)",
-            FrameShading::Calibrated { .. } => "g_f rho(gamma) s(theta) / z²",
-        };
-        let _ = write!(
-            html,
-            "<figure>{}<figcaption>(a) samples in (gamma, z): uneven density</figcaption></figure>\
-             <figure>{}<figcaption>(b) Psi against the samples in depth slices</figcaption></figure><br>\
-             <figure>{}<figcaption>frame</figcaption></figure>\
-             <figure>{}<figcaption>predicted shading {name}</figcaption></figure>\
-             <figure>{}<figcaption>extracted texture (frame / shading)</figcaption></figure>\
-             <p>R² {:.3} / {:.3} / {:.3}; samples used {}; excluded: no hit {}, grazing {}, saturated {}, dark {}.</p>",
-            img_tag(&read(&dens)?, "Fig. 2a", Some(420)),
-            img_tag(&read(&fit)?, "Fig. 2b", Some(420)),
-            img_tag(&png_of(&f.frame, tmp.path(), "frame.png")?, "frame", Some(256)),
-            img_tag(&png_of(&shade, tmp.path(), "shade.png")?, "shading", Some(256)),
-            img_tag(&png_of(&tex, tmp.path(), "tex.png")?, "texture", Some(256)),
-            m.fit_quality[f.index].r2[0],
-            m.fit_quality[f.index].r2[1],
-            m.fit_quality[f.index].r2[2],
-            f.samples.len(),
-            f.samples.excluded.no_hit,
-            f.samples.excluded.grazing,
-            f.samples.excluded.saturated,
-            f.samples.excluded.dark,
-        );
+    frame_figures(&mut html, inputs, tmp.path())?;
+    if let Some(reg) = &m.registration {
+        registration_section(&mut html, reg);
     }
     if let Some(fig) = inputs.new_views {
         new_views_section(&mut html, fig, tmp.path())?;
@@ -383,13 +411,14 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
     let _ = write!(
         html,
         "<h2>Timings (s)</h2><table><tr><th>read case</th><th>segment</th><th>mesh</th><th>atlas</th>\
-         <th>fit Psi</th><th>calibrated light</th><th>cross-validation</th><th>de-light + fuse</th>\
-         </tr><tr><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td>\
+         <th>registration</th><th>fit Psi</th><th>calibrated light</th><th>cross-validation</th><th>de-light + fuse</th>\
+         </tr><tr><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td>\
          <td>{:.2}</td><td>{:.2}</td><td>{:.2}</td></tr></table>",
         t.read_case,
         t.segment,
         t.mesh,
         t.atlas,
+        t.registration,
         t.fit,
         t.calibrated_fit,
         t.cross_validation,
