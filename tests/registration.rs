@@ -102,10 +102,9 @@ fn register(
     .unwrap()
 }
 
-#[test]
-fn tracker_errors_are_recovered_true_poses_kept_and_a_wrong_pose_flagged() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
+/// A 24-frame 160x160 phantom in `dir`/case whose poses carry a tracker's error (1.5 mm / 2
+/// degrees RMS), and the case opened.
+fn tracker_phantom(dir: &Path) -> (std::path::PathBuf, Case) {
     let case_dir = dir.join("case");
     let opts = PhantomOptions {
         frames: 24,
@@ -116,6 +115,14 @@ fn tracker_errors_are_recovered_true_poses_kept_and_a_wrong_pose_flagged() {
     };
     write_phantom_case(&case_dir, &opts).unwrap();
     let case = Case::open(&case_dir).unwrap();
+    (case_dir, case)
+}
+
+#[test]
+fn tracker_errors_are_recovered_true_poses_kept_and_a_wrong_pose_flagged() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (case_dir, case) = tracker_phantom(dir);
     let given: Vec<Affine> = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
     let truth: Vec<Affine> = read_poses(&case_dir.join("truth/poses.json"), &case_dir)
         .unwrap()
@@ -184,16 +191,7 @@ fn tracker_errors_are_recovered_true_poses_kept_and_a_wrong_pose_flagged() {
 fn build_refines_tracker_poses_and_leaves_a_wrong_one_out() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let case_dir = dir.join("case");
-    let opts = PhantomOptions {
-        frames: 24,
-        width: 160,
-        height: 160,
-        pose_noise: PoseNoise::new(1.5, 2.0),
-        ..Default::default()
-    };
-    write_phantom_case(&case_dir, &opts).unwrap();
-    let case = Case::open(&case_dir).unwrap();
+    let (case_dir, case) = tracker_phantom(dir);
     let truth: Vec<Affine> = read_poses(&case_dir.join("truth/poses.json"), &case_dir)
         .unwrap()
         .iter()

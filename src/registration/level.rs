@@ -173,9 +173,17 @@ fn single_step(
     tol: f64,
     with_gain: bool,
 ) -> (Affine, f64, usize, bool) {
-    let Some(mut step) = solve(&cur.lin, lambda, with_gain) else {
+    let Some(step) = solve(&cur.lin, lambda, with_gain) else {
         return (cur.pose, cur.log_k, 0, true);
     };
+    let (xi, dk, size) = within_radius(step, radius);
+    (perturb(&cur.pose, &xi), cur.log_k + dk, 1, size < tol)
+}
+
+/// A solver step scaled down to stay within `radius` (mm, radians): the camera-frame pose step,
+/// the log-gain step, and the step's size (translation mm, or rotation radians x 100 mm,
+/// whichever is larger) for the convergence test.
+fn within_radius(mut step: Vec7, radius: (f64, f64)) -> ([f64; 6], f64, f64) {
     let t = (step[0] * step[0] + step[1] * step[1] + step[2] * step[2]).sqrt();
     let r = (step[3] * step[3] + step[4] * step[4] + step[5] * step[5]).sqrt();
     let shrink = (radius.0 / t.max(1e-300))
@@ -183,8 +191,7 @@ fn single_step(
         .min(1.0);
     step *= shrink;
     let xi = [step[0], step[1], step[2], step[3], step[4], step[5]];
-    let small = (shrink * t).max(shrink * r * 1e2) < tol;
-    (perturb(&cur.pose, &xi), cur.log_k + step[6], 1, small)
+    (xi, step[6], (shrink * t).max(shrink * r * 1e2))
 }
 
 /// Levenberg–Marquardt on `cur`'s fixed points, the motion from `cur.pose` kept within
@@ -202,26 +209,20 @@ fn inner_steps(
     let mut lambda = 1e-3;
     let mut steps = 0;
     for _ in 0..max_steps {
-        let Some(mut step) = solve(&lin, lambda, with_gain) else {
+        let Some(step) = solve(&lin, lambda, with_gain) else {
             break;
         };
         steps += 1;
-        let t = (step[0] * step[0] + step[1] * step[1] + step[2] * step[2]).sqrt();
-        let r = (step[3] * step[3] + step[4] * step[4] + step[5] * step[5]).sqrt();
-        let shrink = (radius.0 / t.max(1e-300))
-            .min(radius.1 / r.max(1e-300))
-            .min(1.0);
-        step *= shrink;
-        let xi = [step[0], step[1], step[2], step[3], step[4], step[5]];
+        let (xi, dk, size) = within_radius(step, radius);
         let cand = perturb(&pose, &xi);
-        let cand_k = log_k + step[6];
+        let cand_k = log_k + dk;
         let trial = cur.prob.evaluate(&cand, cand_k, false);
         if trial.cost < lin.cost {
             pose = cand;
             log_k = cand_k;
             lambda = (lambda / 3.0).max(1e-7);
             // Rotation weighed by 100 mm: 0.02 mrad moves a pixel about 0.003 px.
-            if (shrink * t).max(shrink * r * 1e2) < tol {
+            if size < tol {
                 return (pose, log_k, steps, true);
             }
             let total = delta_between(&cur.pose, &pose);

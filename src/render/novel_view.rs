@@ -12,7 +12,7 @@ use crate::math::Affine;
 use crate::mesh::GeometryError;
 use crate::raycast::Scene;
 use crate::shading::paper::PsiLookup;
-use crate::shading::{FittedShading, ShadingKind, LUMA};
+use crate::shading::{masked_luminance_sum, FittedShading, ShadingKind};
 use crate::texture::atlas::Atlas;
 use crate::Result;
 
@@ -276,15 +276,7 @@ pub fn auto_exposure_gain(inputs: &RenderInputs, frame: &Frame, mask: &[bool], g
     let Some(ae) = ae.filter(|_| gain > 0.0) else {
         return 1.0;
     };
-    let (sum, hits) = frame
-        .rgb
-        .chunks_exact(3)
-        .zip(mask)
-        .filter(|(_, &m)| m)
-        .fold((0.0f64, 0usize), |(s, n), (px, _)| {
-            let lum: f64 = (0..3).map(|c| LUMA[c] * f64::from(px[c])).sum();
-            (s + lum, n + 1)
-        });
+    let (sum, hits) = masked_luminance_sum(&frame.rgb, mask);
     let light = sum / hits.max(1) as f64 / f64::from(gain);
     ae.gain(light)
 }

@@ -11,6 +11,19 @@ use super::paper::PsiModel;
 /// Luminance weights (Rec. 709) that turn an RGB shading into one weight.
 pub const LUMA: [f64; 3] = [0.2126, 0.7152, 0.0722];
 
+/// The sum of the luminance of the pixels of interleaved linear `rgb` whose `mask` flag is
+/// set, and how many they are (a view's mean light, for the inter-reflection and the
+/// auto-exposure).
+pub fn masked_luminance_sum(rgb: &[f32], mask: &[bool]) -> (f64, usize) {
+    rgb.chunks_exact(3)
+        .zip(mask)
+        .filter(|(_, &m)| m)
+        .fold((0.0f64, 0usize), |(s, n), (px, _)| {
+            let lum: f64 = (0..3).map(|c| LUMA[c] * f64::from(px[c])).sum();
+            (s + lum, n + 1)
+        })
+}
+
 /// The shading model of one training frame.
 #[derive(Clone, Copy, Debug)]
 pub enum FrameShading<'a> {

@@ -36,7 +36,7 @@ pub use calibrated::CalibratedModel;
 pub use density::{density_weights, density_weights_nd, DensityWeights, WeightOptions};
 pub use error::ShadingError;
 pub use fitted::FittedShading;
-pub use frame_shading::{FrameShaders, FrameShading, Shade, LUMA};
+pub use frame_shading::{masked_luminance_sum, FrameShaders, FrameShading, Shade, LUMA};
 pub use kind::ShadingKind;
 pub use paper::{fit_psi, FitOptions, PsiModel};
 pub use robust::Robust;

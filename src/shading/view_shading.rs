@@ -6,7 +6,7 @@
 //!   inter-reflection of the view's own light.
 
 use super::calibrated::CalibratedModel;
-use super::frame_shading::LUMA;
+use super::frame_shading::masked_luminance_sum;
 use super::paper::BlendedPsi;
 use crate::image::Frame;
 
@@ -49,15 +49,7 @@ impl ViewShader<'_> {
         if model.interreflection.is_none() || gain <= 0.0 {
             return;
         }
-        let (sum, hits) = frame
-            .rgb
-            .chunks_exact(3)
-            .zip(mask)
-            .filter(|(_, &m)| m)
-            .fold((0.0f64, 0usize), |(s, n), (px, _)| {
-                let lum: f64 = (0..3).map(|c| LUMA[c] * f64::from(px[c])).sum();
-                (s + lum, n + 1)
-            });
+        let (sum, hits) = masked_luminance_sum(&frame.rgb, mask);
         if hits == 0 {
             return;
         }
