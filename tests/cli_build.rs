@@ -10,7 +10,12 @@ fn phantom_then_build_writes_the_model_folder() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     phantom(dir, 8, "128x128");
-    ok(&run(&["build", "case", "--out", "model", "--quiet"], dir));
+    ok(&run(
+        &[
+            "build", "case", "--out", "model", "--quiet", "--poses", "fixed",
+        ],
+        dir,
+    ));
     let model = dir.join("model");
     for f in [
         "model.json",
@@ -114,7 +119,12 @@ fn phantom_then_build_writes_the_model_folder() {
     assert!(html.contains("data:image/png;base64,"));
 
     // An existing model is not replaced without --force.
-    let again = run(&["build", "case", "--out", "model", "--quiet"], dir);
+    let again = run(
+        &[
+            "build", "case", "--out", "model", "--quiet", "--poses", "fixed",
+        ],
+        dir,
+    );
     assert!(!again.status.success());
     assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
 }

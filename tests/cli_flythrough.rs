@@ -35,7 +35,12 @@ fn flythrough_stays_in_the_lumen_and_renders_a_lit_tube() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     phantom(dir, 8, "128x128");
-    ok(&run(&["build", "case", "--out", "model", "--quiet"], dir));
+    ok(&run(
+        &[
+            "build", "case", "--out", "model", "--quiet", "--poses", "fixed",
+        ],
+        dir,
+    ));
     let o = run(
         &["flythrough", "model", "--out", "fly", "--frames", "12"],
         dir,

@@ -47,6 +47,8 @@ fn build(dir: &Path, name: &str, extra: &[&str]) -> f64 {
             "--cross-validate-every",
             "0",
             "--quiet",
+            "--poses",
+            "fixed",
         ],
         dir,
     ));
@@ -97,6 +99,8 @@ fn inspect_reports_the_mask_or_a_black_border_without_one() {
             "96x96",
             "--scope-overlay",
             "--quiet",
+            "--poses",
+            "fixed",
         ],
         dir,
     ));

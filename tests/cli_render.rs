@@ -35,6 +35,8 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
             "--truth",
             "case/truth",
             "--quiet",
+            "--poses",
+            "fixed",
         ],
         dir,
     ));
@@ -56,6 +58,8 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
             "--out",
             "views",
             "--quiet",
+            "--poses",
+            "fixed",
         ],
         dir,
     ));
@@ -239,7 +243,12 @@ fn fused_albedo_matches_the_phantom_truth() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     phantom(dir, 24, "160x160");
-    ok(&run(&["build", "case", "--out", "model", "--quiet"], dir));
+    ok(&run(
+        &[
+            "build", "case", "--out", "model", "--quiet", "--poses", "fixed",
+        ],
+        dir,
+    ));
     let model = bronchosim::model::Model::load(&dir.join("model")).unwrap();
     let truth = dir.join("case/truth");
     let cal = albedo_error(&model, &model.texture, &truth).unwrap();
@@ -322,7 +331,12 @@ fn demo_phantom_albedo_is_within_ten_percent() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     phantom(dir, 80, "320x320");
-    ok(&run(&["build", "case", "--out", "model", "--quiet"], dir));
+    ok(&run(
+        &[
+            "build", "case", "--out", "model", "--quiet", "--poses", "fixed",
+        ],
+        dir,
+    ));
     let model = bronchosim::model::Model::load(&dir.join("model")).unwrap();
     let e = albedo_error(&model, &model.texture, &dir.join("case/truth")).unwrap();
     println!(

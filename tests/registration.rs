@@ -69,6 +69,7 @@ fn build(case: &Path, out: &Path) -> Model {
     let opts = BuildOptions {
         cross_validate_every: 0,
         shading: Some(ShadingKind::Calibrated),
+        poses: PosesMode::Fixed,
         quiet: true,
         ..Default::default()
     };
@@ -249,4 +250,94 @@ fn build_refines_tracker_poses_and_leaves_a_wrong_one_out() {
     assert!(mm < 0.5 * mm0, "{mm} mm");
     let text = std::fs::read_to_string(out.join("poses.json")).unwrap();
     assert_eq!(text.matches("\"status\"").count(), 24);
+}
+
+#[test]
+fn build_keeps_exact_poses_when_refining_does_not_predict_held_out_frames_better() {
+    let tmp = tempfile::tempdir().unwrap();
+    let case_dir = tmp.path().join("case");
+    let opts = PhantomOptions {
+        frames: 24,
+        width: 160,
+        height: 160,
+        ..Default::default()
+    };
+    write_phantom_case(&case_dir, &opts).unwrap();
+    let out = tmp.path().join("model");
+    let build_opts = BuildOptions {
+        cross_validate_every: 4,
+        poses: PosesMode::Refine,
+        registration_rounds: 2,
+        quiet: true,
+        ..Default::default()
+    };
+    let m = build_model(&case_dir, &out, &build_opts).unwrap();
+    let reg = m.registration.as_ref().unwrap();
+    let (given, refined) = (
+        reg.held_out_psnr_given_db.unwrap(),
+        reg.held_out_psnr_refined_db.unwrap(),
+    );
+    println!(
+        "exact poses: held-out frames {given:.2} dB as given, {refined:.2} dB refined; kept {}",
+        reg.kept
+    );
+    assert!(given > refined, "{given} vs {refined} dB");
+    assert_eq!(reg.kept, "given");
+    assert_eq!(reg.left_out, 0);
+    let case = Case::open(&case_dir).unwrap();
+    let written = read_poses(&out.join("poses.json"), &case_dir).unwrap();
+    for (w, g) in written.iter().zip(&case.poses) {
+        assert_eq!(w.pose.camera_to_world, g.pose.camera_to_world);
+    }
+}
+
+#[test]
+fn register_command_writes_poses_and_a_report_and_refuses_bad_input() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let opts = PhantomOptions {
+        frames: 12,
+        width: 128,
+        height: 128,
+        pose_noise: PoseNoise::new(1.0, 1.0),
+        ..Default::default()
+    };
+    write_phantom_case(&dir.join("case"), &opts).unwrap();
+    let bin = env!("CARGO_BIN_EXE_bronchosim");
+    let run = |args: &[&str]| {
+        std::process::Command::new(bin)
+            .args(args)
+            .current_dir(dir)
+            .output()
+            .unwrap()
+    };
+    let out = run(&["register", "case", "--out", "reg", "--rounds", "1"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("poses registered in 1 rounds"), "{text}");
+    let poses = read_poses(&dir.join("reg/poses.json"), &dir.join("case")).unwrap();
+    assert_eq!(poses.len(), 12);
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("reg/registration.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        record["registration"]["frames"].as_array().unwrap().len(),
+        12
+    );
+    let html = std::fs::read_to_string(dir.join("reg/report.html")).unwrap();
+    assert!(html.contains("<svg") && html.contains("camera centre moved (mm)"));
+
+    // An existing result is kept without --force; a folder that is no case is named.
+    let again = run(&["--quiet", "register", "case", "--out", "reg"]);
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("--force"));
+    let bad = run(&["--quiet", "register", "nowhere", "--out", "reg2"]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("nowhere") && err.lines().count() == 1, "{err}");
+    assert!(!dir.join("reg2").exists());
 }

@@ -101,7 +101,12 @@ fn the_viewer_draws_what_render_draws_and_navigates_inside_the_lumen() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     phantom(dir, 24, "160x160");
-    ok(&run(&["build", "case", "--out", "model", "--quiet"], dir));
+    ok(&run(
+        &[
+            "build", "case", "--out", "model", "--quiet", "--poses", "fixed",
+        ],
+        dir,
+    ));
     let o = run(&["view", "model"], dir);
     ok(&o);
     let text = String::from_utf8_lossy(&o.stdout);

@@ -44,6 +44,14 @@ pub struct PoseRegistration {
     pub rounds: Vec<RoundSummary>,
     /// Frames left out of the model.
     pub left_out: usize,
+    /// The poses the model was built with: `refined`, or `given` when the given poses predict
+    /// held-out frames better than the refined ones.
+    pub kept: String,
+    /// The calibrated light's mean PSNR on held-out frames with the given poses (dB; `None`
+    /// without cross-validation).
+    pub held_out_psnr_given_db: Option<f64>,
+    /// The same with the refined poses.
+    pub held_out_psnr_refined_db: Option<f64>,
     /// The poses as given (camera → world, every frame of the case).
     #[serde(skip)]
     pub given: Vec<Affine>,

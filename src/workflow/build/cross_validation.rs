@@ -50,9 +50,10 @@ pub fn cross_validate(
     let train: Vec<usize> = (0..n).filter(|i| !held.contains(i)).collect();
     let frames = held_out_observations(scene, &held, opts)?;
     // New views of held-out frames take the paper's Psi of the training viewpoints only.
+    // (None without Psi: the calibrated light alone is cross-validated.)
     let train_psi: Vec<PsiModel> = train
         .iter()
-        .map(|&i| shading.viewpoints[i].clone())
+        .filter_map(|&i| shading.viewpoints.get(i).cloned())
         .collect();
     let train_shading = FittedShading::new(shading.model, train_psi, shading.calibrated.clone());
     let view_rays = ViewRays::new(&scene.case.camera, 1)?;

@@ -9,6 +9,7 @@
 //! pose, too few comparable pixels, a cost far above the video's) are left out of the model,
 //! never silently kept: [`PoseRegistration`] says which and why, and model.json counts them.
 
+use super::cross_validation::cross_validate;
 use super::error::BuildError;
 use super::fit_pass::fit_pass;
 use super::frames::DepthCache;
@@ -25,6 +26,7 @@ use crate::registration::{
 };
 use crate::render::{MipOptions, MipTexture};
 use crate::shading::calibrated::CalibratedModel;
+use crate::shading::{FittedShading, ShadingKind};
 use crate::Result;
 use std::time::Instant;
 
@@ -55,13 +57,18 @@ pub fn register_poses(
     let given = scene.poses.clone();
     let mut rounds = Vec::new();
     let mut last: Vec<FrameRegistration> = Vec::new();
+    let mut given_score = None;
     for r in 0..opts.registration_rounds {
         let kind = if r == 0 {
             RoundKind::Geometry
         } else {
             RoundKind::Texture
         };
-        let (summary, frames_done) = run_round(scene, &frames, kind, opts, warnings)?;
+        let light = round_light(scene, opts, warnings)?;
+        if r == 0 {
+            given_score = held_out_psnr(scene, &light, opts)?;
+        }
+        let (summary, frames_done) = run_round(scene, &frames, kind, &light, opts)?;
         let settled = r > 0
             && summary.median_step_mm < opts.registration_tolerance_mm
             && summary.median_step_deg < 0.1;
@@ -71,17 +78,36 @@ pub fn register_poses(
             break;
         }
     }
+    // Keep the refined poses only when they predict held-out frames better than the given
+    // ones (the same test, with the same held-out frames, as the shading model's choice).
+    let refined_score = match given_score {
+        Some(_) => {
+            let light = round_light(scene, opts, warnings)?;
+            held_out_psnr(scene, &light, opts)?
+        }
+        None => None,
+    };
+    let kept_given = matches!((given_score, refined_score), (Some(g), Some(r)) if g >= r);
+    if kept_given {
+        scene.poses = given.clone();
+        scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes);
+        warnings.push(format!(
+            "registration: the given poses predict held-out frames better than the refined ones ({:.2} vs {:.2} dB); the model is built with the given poses",
+            given_score.unwrap_or(f64::NAN),
+            refined_score.unwrap_or(f64::NAN)
+        ));
+    }
     let results: Vec<FramePoseResult> = last
         .iter()
         .enumerate()
         .map(|(i, f)| {
-            let d = delta_between(&given[i], &f.pose);
+            let d = delta_between(&given[i], &scene.poses[i]);
             FramePoseResult {
                 frame: i,
                 correction_mm: d.mm(),
                 correction_deg: d.deg(),
                 status: f.status.name().to_string(),
-                used: !flagged(f.status),
+                used: kept_given || !flagged(f.status),
             }
         })
         .collect();
@@ -116,6 +142,9 @@ pub fn register_poses(
         frames: results,
         rounds,
         left_out,
+        kept: if kept_given { "given" } else { "refined" }.to_string(),
+        held_out_psnr_given_db: given_score,
+        held_out_psnr_refined_db: refined_score,
         given,
         refined,
     }))
@@ -127,19 +156,18 @@ fn run_round(
     scene: &mut BuildScene,
     frames: &[Frame],
     kind: RoundKind,
+    light: &CalibratedModel,
     opts: &BuildOptions,
-    warnings: &mut Vec<String>,
 ) -> Result<(RoundSummary, Vec<FrameRegistration>)> {
     let started = Instant::now();
-    let light = round_light(scene, opts, warnings)?;
     // A geometry round still needs the texture: the colour–albedo relation it divides
     // the frames by is fitted on it.
-    let texture = consensus_texture(scene, &light, opts)?;
+    let texture = consensus_texture(scene, light, opts)?;
     let parts = ModelParts {
         scene: &scene.scene,
         tri_uv: &scene.tri_uv,
         texture: Some(&texture),
-        light: &light,
+        light,
         camera: &scene.case.camera,
     };
     let mask = scene.case.mask.as_ref().map(|m| m.image.as_slice());
@@ -183,6 +211,21 @@ fn run_round(
     Ok((summary, video.frames))
 }
 
+/// The calibrated light's mean PSNR on held-out frames at the scene's current poses (the
+/// build's cross-validation, calibrated light only); `None` when cross-validation is off.
+fn held_out_psnr(
+    scene: &BuildScene,
+    light: &CalibratedModel,
+    opts: &BuildOptions,
+) -> Result<Option<f64>> {
+    if opts.cross_validate_every == 0 {
+        return Ok(None);
+    }
+    let shading = FittedShading::new(ShadingKind::Calibrated, Vec::new(), Some(light.clone()));
+    let cv = cross_validate(scene, &shading, opts)?;
+    Ok(cv.models.first().and_then(|m| m.mean_psnr_db))
+}
+
 /// The calibrated light fitted with the scene's current poses (a first pass and the pooled
 /// fit with its refinements).
 fn round_light(
@@ -192,7 +235,12 @@ fn round_light(
 ) -> Result<CalibratedModel> {
     let (_, samples) = fit_pass(scene, opts)?;
     let mut round_warnings = Vec::new();
-    let light = calibrated_light(scene, samples, opts, &mut round_warnings)?;
+    let light_opts = BuildOptions {
+        refine_gains: opts.registration_light_refinements,
+        refine_light: 0,
+        ..opts.clone()
+    };
+    let light = calibrated_light(scene, samples, &light_opts, &mut round_warnings)?;
     warnings.extend(
         round_warnings
             .into_iter()
