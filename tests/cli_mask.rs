@@ -99,8 +99,6 @@ fn inspect_reports_the_mask_or_a_black_border_without_one() {
             "96x96",
             "--scope-overlay",
             "--quiet",
-            "--poses",
-            "fixed",
         ],
         dir,
     ));

@@ -58,8 +58,6 @@ fn render_and_evaluate_the_truth_views_against_the_baselines() {
             "--out",
             "views",
             "--quiet",
-            "--poses",
-            "fixed",
         ],
         dir,
     ));

@@ -105,7 +105,11 @@ for c in ["p1", "p2"]:
     assert abs(float(r["build_total_s"]) - m["timings"]["total"]) < 1e-3, r
     assert 50 < float(r["build_peak_rss_mb"]) < 4000, r["build_peak_rss_mb"]
     assert float(r["peak_rss_mb"]) >= float(r["build_peak_rss_mb"]), r
-    assert r["pose_correction_mm_mean"] == "", "no registration ran: no pose columns"
+    # Registration runs by default: the columns summarise the model's poses.json.
+    frames = json.loads((out / c / "model" / "poses.json").read_text())["frames"]
+    mean_mm = sum(f["correction_mm"] for f in frames) / len(frames)
+    assert abs(float(r["pose_correction_mm_mean"]) - mean_mm) < 1e-3, (r["pose_correction_mm_mean"], mean_mm)
+    assert r["pose_status"] and m["registration"]["kept"] in ("given", "refined"), r["pose_status"]
 assert rows["p1"]["airway_volume_ml"] != rows["p2"]["airway_volume_ml"], "two seeds, one airway?"
 page = (out / "cohort.html").read_text()
 assert all(f"<b>{c}</b>" in page for c in rows) and "no CT: expected" in page
