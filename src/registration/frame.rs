@@ -206,10 +206,9 @@ impl<'a> FrameRegistrar<'a> {
         }
     }
 
-    /// The mean robust cost per residual of `obs` at `pose` on `level`'s grid (gain
-    /// correction 1); `None` when the model cannot be compared with the frame there.
-    pub fn cost_at(&self, obs: &FrameObs, pose: &Affine, level: usize) -> Result<Option<f64>> {
-        let pyr = ObservedPyramid::new(
+    /// The image pyramid of `obs` down to the coarsest level used.
+    fn pyramid(&self, obs: &FrameObs) -> Result<ObservedPyramid> {
+        ObservedPyramid::new(
             obs.frame,
             self.model.parts.camera,
             obs.gain,
@@ -218,7 +217,13 @@ impl<'a> FrameRegistrar<'a> {
                 levels: self.opts.coarsest_level,
                 saturation_level: self.opts.saturation_level,
             },
-        )?;
+        )
+    }
+
+    /// The mean robust cost per residual of `obs` at `pose` on `level`'s grid (gain
+    /// correction 1); `None` when the model cannot be compared with the frame there.
+    pub fn cost_at(&self, obs: &FrameObs, pose: &Affine, level: usize) -> Result<Option<f64>> {
+        let pyr = self.pyramid(obs)?;
         let floor = f64::from(self.opts.noise_floor) / obs.gain;
         let level = level.min(pyr.levels.len() - 1);
         Ok(self
@@ -230,16 +235,7 @@ impl<'a> FrameRegistrar<'a> {
     /// Refine the pose of `obs` starting from `initial` (camera → world).
     pub fn refine_frame(&self, obs: &FrameObs, initial: &Affine) -> Result<FrameRegistration> {
         let o = &self.opts;
-        let pyr = ObservedPyramid::new(
-            obs.frame,
-            self.model.parts.camera,
-            obs.gain,
-            obs.mask,
-            &PyramidOptions {
-                levels: o.coarsest_level,
-                saturation_level: o.saturation_level,
-            },
-        )?;
+        let pyr = self.pyramid(obs)?;
         let floor = f64::from(o.noise_floor) / obs.gain;
         let finest = o.finest_level.min(pyr.levels.len() - 1);
         let coarsest = o.coarsest_level.min(pyr.levels.len() - 1);
