@@ -13,7 +13,7 @@ use bronchosim::registration::{
     pose_error, FrameObs, FrameRegistrar, ModelParts, RegistrationOptions,
 };
 use bronchosim::shading::ShadingKind;
-use bronchosim::workflow::build::{build_model, BuildOptions};
+use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -34,6 +34,7 @@ fn bench(c: &mut Criterion) {
         let build = BuildOptions {
             cross_validate_every: 0,
             shading: Some(ShadingKind::Calibrated),
+            poses: PosesMode::Fixed,
             quiet: true,
             force: true,
             ..Default::default()

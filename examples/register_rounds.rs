@@ -23,7 +23,7 @@ use bronchosim::registration::{
     VideoOptions,
 };
 use bronchosim::shading::ShadingKind;
-use bronchosim::workflow::build::{build_model, BuildOptions};
+use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -136,6 +136,7 @@ fn main() -> anyhow::Result<()> {
     let build_opts = BuildOptions {
         cross_validate_every: 0,
         shading: Some(ShadingKind::Calibrated),
+        poses: PosesMode::Fixed,
         quiet: true,
         force: true,
         ..Default::default()
@@ -236,6 +237,7 @@ fn main() -> anyhow::Result<()> {
     case_copy(&case_dir, &dir.join("case"), &entries)?;
     let opts = BuildOptions {
         truth: Some(case_dir.join("truth")),
+        poses: PosesMode::Fixed,
         quiet: true,
         force: true,
         ..Default::default()
