@@ -71,8 +71,6 @@ pub fn register_command(
 /// A self-contained HTML page: the corrections over the video (mm and degrees), the rounds and
 /// every flagged frame.
 pub fn registration_report(reg: &PoseRegistration, case_dir: &Path) -> String {
-    let mm: Vec<f64> = reg.frames.iter().map(|f| f.correction_mm).collect();
-    let deg: Vec<f64> = reg.frames.iter().map(|f| f.correction_deg).collect();
     let mut html = format!(
         "<!doctype html><meta charset=utf-8><title>bronchosim registration</title>\
          <style>body{{font-family:sans-serif;max-width:60em;margin:2em auto}}td,th{{padding:0 .6em}}</style>\
@@ -82,8 +80,7 @@ pub fn registration_report(reg: &PoseRegistration, case_dir: &Path) -> String {
         reg.left_out
     );
     html.push_str("<h2>Correction of every frame's pose</h2>");
-    html.push_str(&line_plot(&mm, "camera centre moved (mm)", "#1f77b4"));
-    html.push_str(&line_plot(&deg, "camera turned (degrees)", "#d62728"));
+    html.push_str(&correction_plots(reg));
     html.push_str("<h2>Rounds</h2><table><tr><th>round</th><th>against</th><th>median step (mm)</th><th>median step (deg)</th><th>statuses</th><th>s</th></tr>");
     for (i, r) in reg.rounds.iter().enumerate() {
         let counts: Vec<String> = r.counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
@@ -126,8 +123,17 @@ pub fn registration_report(reg: &PoseRegistration, case_dir: &Path) -> String {
     html
 }
 
+/// Two inline SVG plots of every frame's correction of its given pose: the camera centre's
+/// shift (mm) and the rotation (degrees).
+pub(crate) fn correction_plots(reg: &PoseRegistration) -> String {
+    let mm: Vec<f64> = reg.frames.iter().map(|f| f.correction_mm).collect();
+    let deg: Vec<f64> = reg.frames.iter().map(|f| f.correction_deg).collect();
+    line_plot(&mm, "camera centre moved (mm)", "#1f77b4")
+        + &line_plot(&deg, "camera turned (degrees)", "#d62728")
+}
+
 /// An inline SVG line plot of `values` over the frame index.
-pub(crate) fn line_plot(values: &[f64], label: &str, colour: &str) -> String {
+fn line_plot(values: &[f64], label: &str, colour: &str) -> String {
     let (w, h, pad) = (640.0, 160.0, 30.0);
     let top = values.iter().cloned().fold(0.0_f64, f64::max).max(1e-9);
     let n = values.len().max(2) as f64 - 1.0;

@@ -14,7 +14,7 @@ use crate::shading::paper::plots::{plot_psi_slices, plot_samples_density};
 use crate::shading::paper::PsiModel;
 use crate::shading::{FittedShading, FrameShading, SampleSet};
 use crate::workflow::new_views_figure::NewViewsFigure;
-use crate::workflow::register::line_plot;
+use crate::workflow::register::correction_plots;
 use crate::{Error, Result};
 use base64::Engine;
 use std::fmt::Write as _;
@@ -342,10 +342,7 @@ fn registration_section(html: &mut String, reg: &PoseRegistration) {
         reg.left_out,
         reg.frames.len()
     ));
-    let mm: Vec<f64> = reg.frames.iter().map(|f| f.correction_mm).collect();
-    let deg: Vec<f64> = reg.frames.iter().map(|f| f.correction_deg).collect();
-    html.push_str(&line_plot(&mm, "camera centre moved (mm)", "#1f77b4"));
-    html.push_str(&line_plot(&deg, "camera turned (degrees)", "#d62728"));
+    html.push_str(&correction_plots(reg));
 }
 
 /// Write report.html.
