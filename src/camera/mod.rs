@@ -67,6 +67,23 @@ const UNDISTORT_TOL: f64 = 1e-13;
 const UNDISTORT_FAIL: f64 = 1e-10;
 
 impl Camera {
+    /// The camera of the image reduced by `2^level` ([`crate::image::reduce`]): a reduced
+    /// pixel averages a `2^level × 2^level` block, so its centre is at full-resolution
+    /// `2^level u + (2^level - 1) / 2` (pixel centres at integers); the distortion, in
+    /// normalised coordinates, is unchanged.
+    pub fn at_level(&self, level: usize) -> Camera {
+        let s = (1u32 << level) as f64;
+        Camera {
+            width: self.width >> level,
+            height: self.height >> level,
+            fx: self.fx / s,
+            fy: self.fy / s,
+            cx: (self.cx + 0.5) / s - 0.5,
+            cy: (self.cy + 0.5) / s - 0.5,
+            ..*self
+        }
+    }
+
     /// True when all distortion coefficients are zero.
     pub fn is_pinhole(&self) -> bool {
         self.k1 == 0.0 && self.k2 == 0.0 && self.p1 == 0.0 && self.p2 == 0.0 && self.k3 == 0.0

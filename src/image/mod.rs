@@ -1,9 +1,10 @@
-//! Images in linear light: the [`Frame`] type, the sRGB transfer curve and image quality
-//! scores.
+//! Images in linear light: the [`Frame`] type, the sRGB transfer curve, image quality
+//! scores and power-of-two reduction.
 
 pub mod error;
 pub mod frame;
 pub mod quality;
+pub mod reduce;
 pub mod srgb;
 
 pub use error::ImageError;

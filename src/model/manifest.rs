@@ -85,6 +85,10 @@ pub struct ModelManifest {
     pub colour_balance: [f32; 3],
     /// Texel edge length of the atlas on the surface (mm).
     pub texel_mm: f64,
+    /// The fits, the light, the cross-validation and the registration ran on the frames
+    /// reduced by `2^working_level` (the texture is fused from full-resolution pixels).
+    #[serde(default)]
+    pub working_level: usize,
     /// The shading model the texture was de-lit with and new views use.
     pub shading_model: ShadingKind,
     /// The paper's texture (de-lit by each frame's Psi) when the model's shading is

@@ -107,19 +107,9 @@ impl Default for PyramidOptions {
     }
 }
 
-/// The camera of pyramid level `level`: a level-L pixel averages a 2^L x 2^L block, so its
-/// centre is at full-resolution `2^L u + (2^L - 1) / 2` (pixel centres at integers).
+/// The camera of pyramid level `level` ([`Camera::at_level`]).
 pub fn level_camera(camera: &Camera, level: usize) -> Camera {
-    let s = (1u32 << level) as f64;
-    Camera {
-        width: camera.width >> level,
-        height: camera.height >> level,
-        fx: camera.fx / s,
-        fy: camera.fy / s,
-        cx: (camera.cx + 0.5) / s - 0.5,
-        cy: (camera.cy + 0.5) / s - 0.5,
-        ..*camera
-    }
+    camera.at_level(level)
 }
 
 /// The pyramid of one observed frame.

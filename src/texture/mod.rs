@@ -9,6 +9,7 @@
 
 pub mod atlas;
 mod blur;
+pub mod coarse;
 pub mod delight;
 pub mod fusion;
 pub mod output;

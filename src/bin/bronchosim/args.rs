@@ -175,6 +175,19 @@ pub struct BuildArgs {
     /// (each followed by a gain correction; 0 keeps the uniform-albedo light).
     #[arg(long, default_value_t = build_defaults().refine_light)]
     pub light_refits: usize,
+    /// The light's gain corrections and refits compare against a texture fused on one atlas
+    /// texel of every KxK block (1: every texel; their passes cost about 1/K²).
+    #[arg(long, value_name = "K", default_value_t = build_defaults().consensus_texel_factor,
+          value_parser = clap::value_parser!(u32).range(1..=8))]
+    pub consensus_texels: u32,
+    /// Fit, register and cross-validate on the frames reduced by 2^N (default: chosen from
+    /// the texel size and the camera; the texture always takes full-resolution pixels).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=3))]
+    pub working_level: Option<u8>,
+    /// Most pixel samples pooled over the whole video for the calibrated light (its fit's time
+    /// and memory grow with them; a long video keeps fewer per frame, at least 1000).
+    #[arg(long, value_name = "N", default_value_t = build_defaults().max_pooled_samples)]
+    pub max_pooled_samples: usize,
     /// Hold out every N-th frame to cross-validate both shading models (0: skip).
     #[arg(long, default_value_t = build_defaults().cross_validate_every)]
     pub cross_validate_every: usize,

@@ -74,6 +74,9 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
         quiet,
         refine_light: a.light_refits,
         chroma_refits: a.chroma_refits,
+        consensus_texel_factor: a.consensus_texels,
+        max_pooled_samples: a.max_pooled_samples,
+        working_level: a.working_level.map(usize::from),
         poses: a.poses,
         registration_rounds: a.registration_rounds,
         ..Default::default()

@@ -56,7 +56,7 @@ pub fn cross_validate(
         .filter_map(|&i| shading.viewpoints.get(i).cloned())
         .collect();
     let train_shading = FittedShading::new(shading.model, train_psi, shading.calibrated.clone());
-    let view_rays = ViewRays::new(&scene.case.camera, 1)?;
+    let view_rays = ViewRays::new(&scene.camera, 1)?;
     let mut models = Vec::new();
     for kind in shading.kinds() {
         let shaders = shading.frame_shaders(kind)?;
@@ -118,6 +118,7 @@ fn held_out_observations(
     let s = &opts.samples;
     let mut frames = Vec::with_capacity(held.len());
     for (i, f) in scene.case.frames_at(held)? {
+        let f = scene.working_frame(f);
         let g = scene.cast(i);
         let mask = (0..g.z.len())
             .map(|p| {

@@ -67,7 +67,7 @@ pub fn fit_pass(scene: &mut BuildScene, opts: &BuildOptions) -> Result<(FitPass,
     let report_every = (n / 3).max(1);
     let progress = Progress::new("fit Psi", n as u64, opts.quiet);
     for (i, frame) in scene.case.frame_source()?.enumerate() {
-        let frame = frame?;
+        let frame = scene.working_frame(frame?);
         let pose = scene.poses[i];
         let g = scene.cast(i);
         let (samples, model, mut fit) =

@@ -12,21 +12,38 @@ use crate::texture::fusion::FrameStream;
 use crate::workflow::progress::Progress;
 use crate::Result;
 
-/// Depth buffers kept from the fit pass, up to a memory budget.
+/// Depth buffers kept between passes over the frames, up to a memory budget: the working
+/// resolution's from the fit pass, or the full resolution's for the final fusions.
 pub struct DepthCache {
     depth: Vec<Option<Vec<f32>>>,
     budget_bytes: usize,
     used_bytes: usize,
+    /// The buffers are of the frames reduced by `2^level` ([`BuildScene::level`] or 0).
+    pub level: usize,
 }
 
 impl DepthCache {
-    /// A cache for `frames` frames holding at most `budget_bytes` of depth.
-    pub fn new(frames: usize, budget_bytes: usize) -> DepthCache {
+    /// A cache for `frames` frames at the working resolution `level` holding at most
+    /// `budget_bytes` of depth.
+    pub fn new(frames: usize, budget_bytes: usize, level: usize) -> DepthCache {
         DepthCache {
             depth: vec![None; frames],
             budget_bytes,
             used_bytes: 0,
+            level,
         }
+    }
+
+    /// Every frame of `scene` cast at full resolution, as far as `budget_bytes` allows (the
+    /// final fusions read each frame once or twice).
+    pub fn full_resolution(scene: &BuildScene, budget_bytes: usize) -> DepthCache {
+        let n = scene.frame_count();
+        let mut cache = DepthCache::new(n, budget_bytes, 0);
+        let frame_bytes = 4 * scene.case.camera.width as usize * scene.case.camera.height as usize;
+        for i in 0..n.min(budget_bytes / frame_bytes.max(1)) {
+            cache.offer(i, &scene.cast_full(i).z);
+        }
+        cache
     }
 
     /// Keep frame `i`'s depth when it fits the budget.
@@ -44,9 +61,19 @@ impl DepthCache {
     }
 }
 
+/// The resolution a stream of frames is read at.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Resolution {
+    /// The build's working resolution ([`BuildScene::level`]).
+    Working,
+    /// The frames as recorded.
+    Full,
+}
+
 /// The frames of a case (a subset of them, in increasing order) for the fusion passes.
 pub struct CaseFrames<'a> {
     scene: &'a BuildScene,
+    resolution: Resolution,
     shading: &'a dyn FrameShaders,
     /// Frame indices (into the case) of the stream's frames, increasing.
     subset: Vec<usize>,
@@ -59,15 +86,17 @@ pub struct CaseFrames<'a> {
 }
 
 impl<'a> CaseFrames<'a> {
-    /// Stream the frames `subset` (case indices, increasing) of `scene`'s case.
+    /// Stream the frames `subset` (case indices, increasing) of `scene`'s case at `resolution`.
     pub fn new(
         scene: &'a BuildScene,
         shading: &'a dyn FrameShaders,
         subset: Vec<usize>,
+        resolution: Resolution,
         progress: Progress,
     ) -> CaseFrames<'a> {
         CaseFrames {
             scene,
+            resolution,
             shading,
             subset,
             source: None,
@@ -100,22 +129,35 @@ impl FrameStream for CaseFrames<'_> {
                 frames: self.next,
             })??;
             if self.next == index {
-                self.frame = f;
+                self.frame = match self.resolution {
+                    Resolution::Working => self.scene.working_frame(f),
+                    Resolution::Full => f,
+                };
             }
             self.next += 1;
         }
         let pose = &self.scene.poses[index];
+        let working = self.resolution == Resolution::Working || self.scene.level == 0;
+        let level = if working { self.scene.level } else { 0 };
         let depth: &[f32] = match self.scene.cache.get(index) {
-            Some(d) => d,
-            None => {
-                self.depth = self.scene.cast(index).z;
+            Some(d) if self.scene.cache.level == level => d,
+            _ => {
+                self.depth = if working {
+                    self.scene.cast(index).z
+                } else {
+                    self.scene.cast_full(index).z
+                };
                 &self.depth
             }
         };
         self.progress.inc();
         Ok(Observation {
             frame: &self.frame,
-            camera: &self.scene.case.camera,
+            camera: if working {
+                &self.scene.camera
+            } else {
+                &self.scene.case.camera
+            },
             camera_to_world: pose,
             shading: self.shading.frame_shading(index),
             depth,

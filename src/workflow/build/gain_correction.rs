@@ -26,10 +26,10 @@ pub const MIN_FRAMES: u32 = 3;
 pub fn correct_gains(consensus: &Consensus, model: &mut CalibratedModel) -> Result<()> {
     let first = model.clone();
     let mut stream = consensus.frames(&first, "refine gains", consensus.fusion.method.passes() + 1);
-    let fused = fuse(&consensus.scene.texels, &mut stream, &consensus.fusion)?;
+    let fused = fuse(&consensus.texels, &mut stream, &consensus.fusion)?;
     refine_gains_against_texture(
         model,
-        &consensus.scene.texels,
+        &consensus.texels,
         &fused,
         &mut stream,
         &consensus.fusion.delight,

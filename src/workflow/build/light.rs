@@ -6,6 +6,8 @@
 //! 4. refits of the light's shape with the fused texture's albedo, each followed by one more
 //!    gain correction ([`super::light_refit`], `--light-refits`).
 
+use std::borrow::Cow;
+
 use super::error::BuildError;
 use super::fit_pass::LightSamples;
 use super::frames::CaseFrames;
@@ -19,7 +21,9 @@ use crate::shading::calibrated::{
     CalibratedOptions,
 };
 use crate::shading::{ShadingKind, WeightOptions};
+use crate::texture::coarse::CoarseTexels;
 use crate::texture::fusion::{fuse, FusedTexture, FusionMethod, FusionOptions};
+use crate::texture::texels::TexelSet;
 use crate::Result;
 
 /// The fitted light and how it was fitted (model.json's `light_fit`).
@@ -65,7 +69,7 @@ pub fn calibrated_light(
     for _ in 0..opts.chroma_refits {
         refit_with_chroma_albedo(&mut model, &samples.pooled, &density, &cal_opts)?;
     }
-    let consensus = Consensus::new(scene, opts);
+    let consensus = Consensus::coarse(scene, opts, opts.consensus_texel_factor)?;
     for _ in 0..opts.refine_gains {
         correct_gains(&consensus, &mut model)?;
     }
@@ -91,10 +95,15 @@ pub fn calibrated_light(
 
 /// The reference texture the light's refinements compare against: every frame de-lit with the
 /// current light and fused by the plain predicted-intensity average (one pass, every frame's
-/// share in every texel): a consensus, not the sharpest texture.
+/// share in every texel): a consensus, not the sharpest texture. It may be fused on a coarser
+/// sampling of the atlas ([`CoarseTexels`]; `BuildOptions::consensus_texel_factor`).
 pub struct Consensus<'a> {
     /// The scene the frames are streamed from.
     pub scene: &'a BuildScene,
+    /// The texels the consensus is fused on.
+    pub texels: Cow<'a, TexelSet>,
+    /// The coarse sampling `texels` is, when not the scene's own texels.
+    coarse: Option<CoarseTexels>,
     /// The fusion of the reference texture.
     pub fusion: FusionOptions,
     /// No progress bars.
@@ -102,10 +111,12 @@ pub struct Consensus<'a> {
 }
 
 impl<'a> Consensus<'a> {
-    /// The consensus fusion of the build `opts`.
+    /// The consensus fusion of the build `opts` on every texel of the scene.
     pub fn new(scene: &'a BuildScene, opts: &BuildOptions) -> Consensus<'a> {
         Consensus {
             scene,
+            texels: Cow::Borrowed(&scene.texels),
+            coarse: None,
             fusion: FusionOptions {
                 method: FusionMethod::WeightedAverage {
                     weight_exponent: 1.0,
@@ -114,6 +125,21 @@ impl<'a> Consensus<'a> {
             },
             quiet: opts.quiet,
         }
+    }
+
+    /// The same on one texel of every `factor × factor` block of the atlas (1: every texel).
+    pub fn coarse(
+        scene: &'a BuildScene,
+        opts: &BuildOptions,
+        factor: u32,
+    ) -> Result<Consensus<'a>> {
+        let mut consensus = Consensus::new(scene, opts);
+        if factor > 1 {
+            let coarse = CoarseTexels::new(&scene.texels, factor)?;
+            consensus.texels = Cow::Owned(coarse.texels.clone());
+            consensus.coarse = Some(coarse);
+        }
+        Ok(consensus)
     }
 
     /// Every frame shaded by `model`, with a progress bar over `passes` passes.
@@ -128,11 +154,21 @@ impl<'a> Consensus<'a> {
             .frames(model, (0..n).collect(), label, passes, self.quiet)
     }
 
-    /// The consensus texture of every frame de-lit with `model`.
-    pub fn fuse(&self, model: &CalibratedModel, label: &str) -> Result<FusedTexture> {
+    /// The consensus texture of every frame de-lit with `model`, on [`Consensus::texels`].
+    fn fuse_own(&self, model: &CalibratedModel, label: &str) -> Result<FusedTexture> {
         let mut stream = self.frames(model, label, self.fusion.method.passes());
-        let fused = fuse(&self.scene.texels, &mut stream, &self.fusion)?;
+        let fused = fuse(&self.texels, &mut stream, &self.fusion)?;
         stream.progress.finish();
         Ok(fused)
+    }
+
+    /// The consensus texture of every frame de-lit with `model`, on every texel of the scene
+    /// (a coarse fusion's block samples spread over their blocks).
+    pub fn fuse(&self, model: &CalibratedModel, label: &str) -> Result<FusedTexture> {
+        let fused = self.fuse_own(model, label)?;
+        Ok(match &self.coarse {
+            Some(coarse) => coarse.expand(&fused, &self.scene.texels),
+            None => fused,
+        })
     }
 }

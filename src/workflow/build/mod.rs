@@ -76,7 +76,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     });
     shading.model = choose_model(opts.shading, &shading, cross_validation.as_ref());
     let textures = timed(&mut timings.fusion, || {
-        textures::fuse_textures(&scene, &shading, pass.pixel_sum, opts)
+        textures::fuse_textures(&mut scene, &shading, pass.pixel_sum, opts)
     })?;
     let built = write::BuiltModel {
         scene: &scene,

@@ -50,9 +50,12 @@ pub fn register_poses(
     if opts.poses == PosesMode::Fixed || opts.registration_rounds == 0 {
         return Ok(None);
     }
+    // At the working resolution: the registration's finest grid is ~80 points across, and
+    // the frames of a long HD video stay in memory at a fraction of their size.
     let frames: Vec<Frame> = scene
         .case
         .frame_source()?
+        .map(|f| f.map(|f| scene.working_frame(f)))
         .collect::<std::result::Result<_, _>>()?;
     let given = scene.poses.clone();
     let mut rounds = Vec::new();
@@ -90,7 +93,7 @@ pub fn register_poses(
     let kept_given = matches!((given_score, refined_score), (Some(g), Some(r)) if g >= r);
     if kept_given {
         scene.poses = given.clone();
-        scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes);
+        scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
         warnings.push(format!(
             "registration: the given poses predict held-out frames better than the refined ones ({:.2} vs {:.2} dB); the model is built with the given poses",
             given_score.unwrap_or(f64::NAN),
@@ -168,9 +171,9 @@ fn run_round(
         tri_uv: &scene.tri_uv,
         texture: Some(&texture),
         light,
-        camera: &scene.case.camera,
+        camera: &scene.camera,
     };
-    let mask = scene.case.mask.as_ref().map(|m| m.image.as_slice());
+    let mask = scene.mask.as_deref();
     let video = register_round(
         parts,
         frames,
@@ -207,7 +210,7 @@ fn run_round(
         counts: video.counts.clone(),
         seconds: started.elapsed().as_secs_f64(),
     };
-    scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes);
+    scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
     Ok((summary, video.frames))
 }
 

@@ -3,8 +3,11 @@
 
 use std::time::Instant;
 
-use super::frames::{CaseFrames, DepthCache};
+use super::frames::{CaseFrames, DepthCache, Resolution};
 use super::options::BuildOptions;
+use crate::camera::Camera;
+use crate::image::reduce::{reduce_frame, reduce_mask};
+use crate::image::Frame;
 use crate::io::case::Case;
 use crate::io::poses::FrameRef;
 use crate::math::Affine;
@@ -37,12 +40,24 @@ pub struct BuildScene {
     pub tri_uv: Vec<[[f32; 2]; 3]>,
     /// The atlas mesh, ready for ray casting.
     pub scene: Scene,
-    /// The training camera's rays.
+    /// The working resolution of the fits, the light, the cross-validation and the
+    /// registration: the frames reduced by `2^level` (the texture is fused from full-resolution
+    /// pixels).
+    pub level: usize,
+    /// The camera at the working resolution.
+    pub camera: Camera,
+    /// The case's image mask at the working resolution.
+    pub mask: Option<Vec<bool>>,
+    /// The working camera's rays.
     pub rays: RayTable,
-    /// cos theta (off the optical axis) of every pixel's ray.
+    /// The full-resolution camera's rays (the final fusion's visibility).
+    pub full_rays: RayTable,
+    /// cos theta (off the optical axis) of every working pixel's ray.
     pub cos_theta: Vec<f32>,
-    /// Depth buffers kept from the first pass over the frames.
+    /// Depth buffers (working resolution) kept from the first pass over the frames.
     pub cache: DepthCache,
+    /// Linear intensity at which a channel is saturated (kept saturated by the reduction).
+    pub saturation_level: f32,
 }
 
 impl BuildScene {
@@ -72,7 +87,26 @@ impl BuildScene {
         timings.atlas = t.elapsed().as_secs_f64();
 
         let scene = Scene::new(&atlas.mesh)?;
-        let rays = RayTable::new(&case.camera);
+        let full_rays = RayTable::new(&case.camera);
+        let level = match opts.working_level {
+            Some(level) => level,
+            None => working_level(&case, &scene, opts.atlas.texel_mm),
+        }
+        .min(max_level(&case.camera));
+        let camera = case.camera.at_level(level);
+        let rays = if level == 0 {
+            full_rays.clone()
+        } else {
+            RayTable::new(&camera)
+        };
+        let mask = case.mask.as_ref().map(|m| {
+            reduce_mask(
+                &m.image,
+                case.camera.width as usize,
+                case.camera.height as usize,
+                level,
+            )
+        });
         let n = case.frame_count();
         Ok(BuildScene {
             poses: case.poses.iter().map(|p| p.pose.camera_to_world).collect(),
@@ -81,20 +115,47 @@ impl BuildScene {
             texels,
             atlas,
             scene,
+            level,
+            camera,
+            mask,
             cos_theta: cos_theta_of(&rays),
             rays,
-            cache: DepthCache::new(n, opts.depth_cache_bytes),
+            full_rays,
+            cache: DepthCache::new(n, opts.depth_cache_bytes, level),
+            saturation_level: opts.samples.saturation_level,
             case,
         })
     }
 
-    /// Ray cast frame `i` from its pose; pixels outside the case's image mask see nothing.
+    /// Ray cast frame `i` from its pose at the working resolution; pixels outside the case's
+    /// image mask see nothing.
     pub fn cast(&self, i: usize) -> GBuffer {
         let mut g = cast_frame_with(&self.scene, &self.rays, &self.poses[i]);
+        if let Some(mask) = &self.mask {
+            g.mask_out(mask);
+        }
+        g
+    }
+
+    /// Ray cast frame `i` at full resolution.
+    pub fn cast_full(&self, i: usize) -> GBuffer {
+        if self.level == 0 {
+            return self.cast(i);
+        }
+        let mut g = cast_frame_with(&self.scene, &self.full_rays, &self.poses[i]);
         if let Some(mask) = &self.case.mask {
             g.mask_out(&mask.image);
         }
         g
+    }
+
+    /// A decoded frame at the working resolution.
+    pub fn working_frame(&self, frame: Frame) -> Frame {
+        if self.level == 0 {
+            frame
+        } else {
+            reduce_frame(&frame, self.level, self.saturation_level)
+        }
     }
 
     /// Keep only the frames `keep` (increasing indices into the current ones), e.g. those the
@@ -102,7 +163,7 @@ impl BuildScene {
     pub fn keep_frames(&mut self, keep: &[usize], cache_bytes: usize) {
         self.case.poses = keep.iter().map(|&i| self.case.poses[i].clone()).collect();
         self.poses = keep.iter().map(|&i| self.poses[i]).collect();
-        self.cache = DepthCache::new(self.poses.len(), cache_bytes);
+        self.cache = DepthCache::new(self.poses.len(), cache_bytes, self.level);
     }
 
     /// Number of frames.
@@ -121,7 +182,20 @@ impl BuildScene {
         quiet: bool,
     ) -> CaseFrames<'a> {
         let progress = Progress::new(label, (passes * subset.len()) as u64, quiet);
-        CaseFrames::new(self, shading, subset, progress)
+        CaseFrames::new(self, shading, subset, Resolution::Working, progress)
+    }
+
+    /// The same at full resolution (the final fusion: the texture keeps every pixel's detail).
+    pub fn full_frames<'a>(
+        &'a self,
+        shading: &'a dyn FrameShaders,
+        subset: Vec<usize>,
+        label: &str,
+        passes: usize,
+        quiet: bool,
+    ) -> CaseFrames<'a> {
+        let progress = Progress::new(label, (passes * subset.len()) as u64, quiet);
+        CaseFrames::new(self, shading, subset, Resolution::Full, progress)
     }
 
     /// Frame `i`'s file name (PNG) or index (video), for messages.
@@ -130,5 +204,55 @@ impl BuildScene {
             FrameRef::Image(p) => p.display().to_string(),
             FrameRef::VideoIndex(k) => format!("video frame {k}"),
         }
+    }
+}
+
+/// Most reductions of the working resolution: the short side keeps at least 256 pixels (the
+/// 320-pixel demo is fitted and registered at full resolution; its pixel-bound stages are a
+/// small share of its build, so reducing it saves nothing measurable).
+fn max_level(camera: &Camera) -> usize {
+    (0..=3)
+        .rev()
+        .find(|&l| camera.width.min(camera.height) >> l >= 256)
+        .unwrap_or(0)
+}
+
+/// The working level chosen from the texel size and the camera: the coarsest at which a
+/// pixel still covers no more than one texel at the median depth the video sees (sampled on
+/// three frames by a coarse ray cast). Finer pixels would only resolve detail the texture's
+/// fit does not use, at a cost that grows with the pixels.
+fn working_level(case: &Case, scene: &Scene, texel_mm: f64) -> usize {
+    let n = case.poses.len();
+    if n == 0 {
+        return 0;
+    }
+    // A coarse probe (~64 pixels across) is enough for a median.
+    let probe_level = (0..=4)
+        .rev()
+        .find(|&l| case.camera.width.min(case.camera.height) >> l >= 64)
+        .unwrap_or(0);
+    let probe = case.camera.at_level(probe_level);
+    let rays = RayTable::new(&probe);
+    let mut depths: Vec<f32> = [0, n / 2, n - 1]
+        .iter()
+        .flat_map(|&i| {
+            cast_frame_with(scene, &rays, &case.poses[i].pose.camera_to_world)
+                .z
+                .into_iter()
+                .filter(|z| z.is_finite() && *z > 0.0)
+        })
+        .collect();
+    if depths.is_empty() {
+        return 0;
+    }
+    let mid = depths.len() / 2;
+    let (_, median, _) = depths.select_nth_unstable_by(mid, f32::total_cmp);
+    let focal = case.camera.fx.min(case.camera.fy);
+    // Pixel footprint at level L: 2^L * z / f (mm).
+    let ratio = texel_mm * focal / f64::from(*median);
+    if ratio >= 2.0 {
+        ratio.log2().floor() as usize
+    } else {
+        0
     }
 }

@@ -3,6 +3,7 @@
 //! each frame's Psi) beside it, so the paper's method stays the reference new views are
 //! compared against.
 
+use super::frames::DepthCache;
 use super::options::BuildOptions;
 use super::scene::BuildScene;
 use crate::shading::{FittedShading, ShadingKind};
@@ -30,11 +31,16 @@ pub struct Textures {
 /// De-light and fuse every frame with `shading.model` (and the paper's Psi when that is not
 /// it); `pixel_sum` is the first pass's sum of the model-obeying pixels per channel.
 pub fn fuse_textures(
-    scene: &BuildScene,
+    scene: &mut BuildScene,
     shading: &FittedShading,
     pixel_sum: [f64; 3],
     opts: &BuildOptions,
 ) -> Result<Textures> {
+    if scene.level > 0 && shading.model != ShadingKind::Paper {
+        // Two fusions from full-resolution pixels: cast every frame once for both.
+        scene.cache = DepthCache::full_resolution(scene, opts.depth_cache_bytes);
+    }
+    let scene = &*scene;
     let albedo = fuse_albedo(
         scene,
         shading,
@@ -70,7 +76,7 @@ fn fuse_albedo(
     let shaders = shading.frame_shaders(kind)?;
     let n = scene.frame_count();
     let passes = opts.fusion.method.passes();
-    let mut stream = scene.frames(shaders, (0..n).collect(), label, passes, opts.quiet);
+    let mut stream = scene.full_frames(shaders, (0..n).collect(), label, passes, opts.quiet);
     let fused = fuse(&scene.texels, &mut stream, &opts.fusion)?;
     stream.progress.finish();
     let mut rgb = fused.filled(&scene.texels)?;

@@ -133,6 +133,7 @@ fn write_model_files(out_dir: &OutputDir, built: &BuiltModel) -> Result<ModelMan
         albedo_scale: tex.albedo_scale,
         colour_balance: albedo.colour_balance,
         texel_mm: atlas.texel_mm,
+        working_level: scene.level,
         shading_model: built.shading.model,
         paper_texture,
         cross_validation: built.cross_validation.clone(),

@@ -1,0 +1,87 @@
+//! Frames and pixel masks reduced by a power of two: the working resolution of the build's
+//! fitting and registration passes (`workflow::build`), matching
+//! [`crate::camera::Camera::at_level`].
+
+use super::Frame;
+
+/// `frame` averaged over blocks of `2^level × 2^level` pixels (the last rows and columns that
+/// do not fill a block are dropped, as in [`crate::camera::Camera::at_level`]). A channel that
+/// is saturated (`>= saturation_level`) in any pixel of a block is saturated (1.0) in the
+/// result: its average would hide a clipped value that the fits must leave out.
+pub fn reduce_frame(frame: &Frame, level: usize, saturation_level: f32) -> Frame {
+    if level == 0 {
+        return frame.clone();
+    }
+    let s = 1usize << level;
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    let (nw, nh) = (w >> level, h >> level);
+    let inv = 1.0 / (s * s) as f32;
+    let mut out = Frame::new(nw as u32, nh as u32);
+    for y in 0..nh {
+        for x in 0..nw {
+            let mut sum = [0.0f32; 3];
+            let mut saturated = [false; 3];
+            for dy in 0..s {
+                let row = 3 * ((s * y + dy) * w + s * x);
+                for px in frame.rgb[row..row + 3 * s].chunks_exact(3) {
+                    for c in 0..3 {
+                        sum[c] += px[c];
+                        saturated[c] |= px[c] >= saturation_level;
+                    }
+                }
+            }
+            let o = 3 * (y * nw + x);
+            for c in 0..3 {
+                out.rgb[o + c] = if saturated[c] { 1.0 } else { sum[c] * inv };
+            }
+        }
+    }
+    out
+}
+
+/// `mask` (`width × height` flags, row-major) reduced like [`reduce_frame`]: a reduced pixel is
+/// usable when every pixel of its block is.
+pub fn reduce_mask(mask: &[bool], width: usize, height: usize, level: usize) -> Vec<bool> {
+    let s = 1usize << level;
+    let (nw, nh) = (width >> level, height >> level);
+    (0..nw * nh)
+        .map(|i| {
+            let (x, y) = (i % nw, i / nw);
+            (0..s).all(|dy| mask[(s * y + dy) * width + s * x..][..s].iter().all(|&m| m))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blocks_are_averaged_and_saturation_survives() {
+        let mut f = Frame::new(5, 4);
+        for y in 0..4 {
+            for x in 0..5 {
+                f.set(x, y, [0.1 * x as f32, 0.1 * y as f32, 0.2]);
+            }
+        }
+        f.set(2, 2, [0.2, 1.0, 0.2]);
+        let r = reduce_frame(&f, 1, 0.999);
+        assert_eq!((r.width, r.height), (2, 2));
+        let a = r.get(0, 0);
+        assert!((a[0] - 0.05).abs() < 1e-6 && (a[1] - 0.05).abs() < 1e-6);
+        assert!((a[2] - 0.2).abs() < 1e-6);
+        // Block (1, 1) holds the pixel saturated in green only.
+        let b = r.get(1, 1);
+        assert_eq!(b[1], 1.0);
+        assert!((b[0] - 0.25).abs() < 1e-6 && (b[2] - 0.2).abs() < 1e-6);
+        assert_eq!(reduce_frame(&f, 0, 0.999), f);
+    }
+
+    #[test]
+    fn a_masked_out_pixel_masks_its_block() {
+        let mut m = vec![true; 4 * 4];
+        m[5] = false; // (1, 1)
+        assert_eq!(reduce_mask(&m, 4, 4, 1), vec![false, true, true, true]);
+        assert_eq!(reduce_mask(&m, 4, 4, 2), vec![false]);
+    }
+}
