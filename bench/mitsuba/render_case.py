@@ -14,7 +14,7 @@ Light transport: path tracing (`path`, max_depth 4 = direct light plus two indir
 a `spot` emitter at the camera centre along the optical axis (40 degree beam, 70 degree cutoff,
 Mitsuba's linear fall-off in angle between them), the `principled` BSDF (roughness 0.4,
 specular 0.5, i.e. F0 = 0.04, not metallic) with the phantom's albedo per vertex.
-Sensor: per-frame auto-gain putting the 99th percentile of the luminance at 0.9, then
+Sensor: per-frame auto-gain putting the 99th percentile of the brightest channel at 0.9, then
 Poisson-Gaussian noise, clipping at 1, 8-bit sRGB. Truth views: the same light at the reference
 gain (frame 0's), more paths a pixel, no sensor noise.
 """
@@ -46,7 +46,7 @@ def parse_args():
     p.add_argument("--cutoff-deg", type=float, default=70.0, help="spot: zero-intensity half angle (deg)")
     p.add_argument("--roughness", type=float, default=0.4, help="principled roughness")
     p.add_argument("--specular", type=float, default=0.5, help="principled specular (F0 = 0.08 x this)")
-    p.add_argument("--gain-percentile", type=float, default=99.0, help="auto-gain: this luminance percentile...")
+    p.add_argument("--gain-percentile", type=float, default=99.0, help="auto-gain: this percentile of the brightest channel...")
     p.add_argument("--gain-target", type=float, default=0.9, help="...is scaled to this linear value")
     p.add_argument("--full-well", type=float, default=4000.0, help="electrons at signal 1 (shot noise)")
     p.add_argument("--read-noise", type=float, default=0.002, help="read noise std (linear full scale)")
@@ -59,8 +59,9 @@ def parse_args():
 
 
 def auto_gain(radiance, opts):
-    """Gain putting the `gain_percentile` of the frame's luminance at `gain_target`."""
-    p = np.percentile(radiance @ LUMA, opts.gain_percentile)
+    """Gain putting the `gain_percentile` of the frame's brightest channel per pixel at
+    `gain_target` (on luminance, the red mucosa would clip its red channel in half the frame)."""
+    p = np.percentile(radiance.max(axis=2), opts.gain_percentile)
     return opts.gain_target / p if p > 0 else 1.0
 
 
@@ -199,7 +200,7 @@ def manifest(opts, cam_in, records, lumen, stats, camera_check):
                   "falloff": "1 inside the beam, linear in angle to 0 at the cutoff", "intensity_w_per_sr": opts.intensity},
         "bsdf": {"type": "principled", "base_color": "per-vertex albedo (linear RGB)", "roughness": opts.roughness,
                  "specular": opts.specular, "metallic": 0.0},
-        "sensor": {"auto_gain": f"gain = {opts.gain_target} / percentile {opts.gain_percentile} of the linear luminance",
+        "sensor": {"auto_gain": f"gain = {opts.gain_target} / percentile {opts.gain_percentile} of each pixel's brightest linear channel",
                    "noise": "Poisson-Gaussian: s + sqrt(s / full_well) N + read_noise N, then clip to [0, 1]",
                    "full_well_electrons": opts.full_well, "read_noise": opts.read_noise, "encoding": "8-bit sRGB PNG"},
         "reference_gain": records[0]["gain"],
