@@ -15,8 +15,8 @@ a `spot` emitter at the camera centre along the optical axis (40 degree beam, 70
 Mitsuba's linear fall-off in angle between them), the `principled` BSDF (roughness 0.4,
 specular 0.5, i.e. F0 = 0.04, not metallic) with the phantom's albedo per vertex.
 Sensor: per-frame auto-gain putting the 99th percentile of the brightest channel at 0.9, then
-Poisson-Gaussian noise, clipping at 1, 8-bit sRGB. Truth views: the same light at the reference
-gain (frame 0's), more paths a pixel, no sensor noise.
+Poisson-Gaussian noise, clipping at 1, 8-bit sRGB. Truth views: the same light at one reference
+gain (the lowest of the views' own auto-gains), more paths a pixel, no sensor noise.
 """
 
 import argparse
@@ -52,6 +52,8 @@ def parse_args():
     p.add_argument("--read-noise", type=float, default=0.002, help="read noise std (linear full scale)")
     p.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (scalar_rgb needs no LLVM)")
     p.add_argument("--force", action="store_true", help="replace NEW_CASE if it exists")
+    p.add_argument("--views-only", action="store_true",
+                   help="re-render only the truth views of an existing NEW_CASE (same settings)")
     a = p.parse_args()
     a.intensity = 1000.0  # W/sr; any value: the auto-gain normalises it
     a.albedo_ply = a.case / "truth" / "albedo_vertices.ply"
@@ -144,14 +146,24 @@ def render_frames(ctx, truth_poses, case_poses, opts, mask, stats):
     return records
 
 
-def render_views(ctx, lumen, cam, views, gain, opts, stats):
-    """Clean truth views at the reference gain, with their pixel-centre buffers."""
+def render_views(ctx, lumen, cam, views, opts, stats):
+    """Clean truth views with their pixel-centre buffers, all at one reference gain: the lowest
+    of the views' own auto-gains, so that no view clips more than its auto-gain would (at frame
+    0's gain, as the phantom does, the views of the default phantom clip 5-80 % of their
+    pixels: frame 0 looks down the trachea, the views are nearer the walls). Returns
+    (reference gain, the views' own auto-gains)."""
     sc, scene, params = ctx
     vdir = opts.out / "truth" / "views"
-    entries, times = [], []
+    entries, times, radiances = [], [], []
     for k, (_, pose) in enumerate(views):
         t0 = time.perf_counter()
-        rad = finite(sc.render(scene, params, pose, opts.view_spp, opts.seed * 100003 + 50000 + k), f"view {k}", stats)
+        seed = opts.seed * 100003 + 50000 + k
+        radiances.append(finite(sc.render(scene, params, pose, opts.view_spp, seed), f"view {k}", stats))
+        times.append(time.perf_counter() - t0)
+        print(f"view {k + 1}/{len(views)}: {times[-1]:.1f} s", flush=True)
+    own = [auto_gain(r, opts) for r in radiances]
+    gain = min(own)
+    for k, ((_, pose), rad) in enumerate(zip(views, radiances)):
         img = expose(rad, gain, opts, None)
         hit, dist, alb = sc.pixel_centre_buffers(scene, lumen, cam, pose)
         stem = f"{k:06d}"
@@ -162,10 +174,9 @@ def render_views(ctx, lumen, cam, views, gain, opts, stats):
         cio.write_png16(vdir / f"{stem}_depth.png", depth)
         cio.write_linear16(vdir / f"{stem}_albedo.png", alb)
         entries.append((f"views/{stem}.png", pose))
-        times.append(time.perf_counter() - t0)
-        print(f"view {k + 1}/{len(views)}: {times[-1]:.1f} s", flush=True)
     cio.write_poses(opts.out / "truth" / "views.json", entries)
     stats["seconds_per_view"] = float(np.mean(times))
+    return gain, own
 
 
 FILES = {
@@ -174,7 +185,7 @@ FILES = {
     "poses.json": "the true pose of every frame (frames were rendered there); the case's poses.json is the input case's",
     "views.json": "novel view poses (camera_to_world), images relative to truth/",
     "camera.json": "pinhole camera of the frames and views (no distortion)",
-    "views/NNNNNN.png": "sRGB 8-bit, no sensor noise, reference gain (Monte Carlo noise of view_spp paths remains)",
+    "views/NNNNNN.png": "sRGB 8-bit, no sensor noise, reference_gain (Monte Carlo noise of spp_views paths remains)",
     "views/NNNNNN_linear.png": "linear 16-bit RGB: value = code / 65535",
     "views/NNNNNN_mask.png": "8-bit: 255 where the pixel-centre ray hits the mesh",
     "views/NNNNNN_depth.png": "16-bit: distance camera centre to surface along the pixel-centre ray, code / 100 mm (0 = miss)",
@@ -182,7 +193,7 @@ FILES = {
 }
 
 
-def manifest(opts, cam_in, records, lumen, stats, camera_check):
+def manifest(opts, cam_in, records, lumen, stats, camera_check, view_gains):
     import mitsuba as mi
 
     return {
@@ -203,7 +214,9 @@ def manifest(opts, cam_in, records, lumen, stats, camera_check):
         "sensor": {"auto_gain": f"gain = {opts.gain_target} / percentile {opts.gain_percentile} of each pixel's brightest linear channel",
                    "noise": "Poisson-Gaussian: s + sqrt(s / full_well) N + read_noise N, then clip to [0, 1]",
                    "full_well_electrons": opts.full_well, "read_noise": opts.read_noise, "encoding": "8-bit sRGB PNG"},
-        "reference_gain": records[0]["gain"],
+        "reference_gain": view_gains[0],
+        "reference_gain_rule": "the lowest of the views' own auto-gains (the views share one gain; frame 0's would clip them)",
+        "view_auto_gains": view_gains[1],
         "frame_gains": records,
         "mesh": {"vertices": len(lumen.positions), "triangles": len(lumen.faces), **lumen.info},
         "camera_check_median_relative_depth_error": camera_check,
@@ -225,7 +238,12 @@ def main():
     if len(truth_poses) != len(case_poses):
         cio.fail(opts.case / "poses.json", f"{len(case_poses)} frames, truth/poses.json {len(truth_poses)}")
     views = cio.read_poses(opts.case / "truth" / "views.json")
-    cam, mask = prepare_output(opts, cam_in)
+    if opts.views_only:
+        old = cio.read_json(opts.out / "truth" / "truth.json")
+        cam, records, stats = cio.read_camera(opts.out / "camera.json"), old["frame_gains"], old["timing"]
+    else:
+        cam, mask = prepare_output(opts, cam_in)
+        stats = {}
     verts, faces = cio.read_ply(opts.albedo_ply)
     lumen = sc.lumen_mesh(verts, faces, opts)
     check = sc.check_camera(lumen, cam, opts, views[0][1])
@@ -233,12 +251,14 @@ def main():
         cio.fail(opts.out / "camera.json", f"Mitsuba's sensor disagrees with the ray cast (median depth error {check:.3g})")
     scene = sc.build_scene(lumen.mesh, cam, opts)
     ctx = (sc, scene, mi.traverse(scene))
-    stats = {}
     t0 = time.perf_counter()
-    records = render_frames(ctx, truth_poses, case_poses, opts, mask, stats)
-    render_views(ctx, lumen, cam, views, records[0]["gain"], opts, stats)
-    stats["total_seconds"] = time.perf_counter() - t0
-    cio.write_json(opts.out / "truth" / "truth.json", manifest(opts, cam_in, records, lumen, stats, check))
+    if not opts.views_only:
+        records = render_frames(ctx, truth_poses, case_poses, opts, mask, stats)
+        stats["frames_seconds"] = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    view_gains = render_views(ctx, lumen, cam, views, opts, stats)
+    stats["views_seconds"] = time.perf_counter() - t1
+    cio.write_json(opts.out / "truth" / "truth.json", manifest(opts, cam_in, records, lumen, stats, check, view_gains))
     print(f"wrote {opts.out}: {len(records)} frames ({stats['seconds_per_frame']:.1f} s each), "
           f"{len(views)} views ({stats['seconds_per_view']:.1f} s each)")
 
