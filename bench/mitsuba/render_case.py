@@ -60,10 +60,12 @@ def parse_args():
     return a
 
 
-def auto_gain(radiance, opts):
-    """Gain putting the `gain_percentile` of the frame's brightest channel per pixel at
-    `gain_target` (on luminance, the red mucosa would clip its red channel in half the frame)."""
-    p = np.percentile(radiance.max(axis=2), opts.gain_percentile)
+def auto_gain(radiance, opts, mask=None):
+    """Gain putting the `gain_percentile` of the brightest channel per pixel (over the image
+    pixels of `mask`, default all) at `gain_target` (on luminance, the red mucosa would clip
+    its red channel in half the frame)."""
+    peak = radiance.max(axis=2)
+    p = np.percentile(peak if mask is None else peak[mask], opts.gain_percentile)
     return opts.gain_target / p if p > 0 else 1.0
 
 
@@ -128,7 +130,7 @@ def render_frames(ctx, truth_poses, case_poses, opts, mask, stats):
     for i in range(n):
         t0 = time.perf_counter()
         rad = finite(sc.render(scene, params, truth_poses[i][1], opts.spp, opts.seed * 100003 + i), f"frame {i}", stats)
-        gain = auto_gain(rad, opts)
+        gain = auto_gain(rad, opts, mask)
         img = expose(rad, gain, opts, np.random.default_rng([opts.seed, 1, i]))
         if mask is not None:
             img[~mask] = 0.0
