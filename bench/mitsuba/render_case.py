@@ -114,6 +114,8 @@ def prepare_output(opts, cam_in):
         cio.link_or_copy(src / "mask.png", opts.out / "mask.png")
         mask = cio.read_png_raw(src / "mask.png")
         mask = (mask if mask.ndim == 2 else mask[:, :, 0]) > 127
+        if mask.shape != (cam_in["height"], cam_in["width"]):
+            cio.fail(src / "mask.png", f"is {mask.shape[1]}x{mask.shape[0]}, the camera {cam_in['width']}x{cam_in['height']}")
     cam = cio.pinhole_camera(cam_in)
     cio.write_camera(opts.out / "camera.json", cam)
     cio.write_camera(opts.out / "truth" / "camera.json", cam)
