@@ -16,7 +16,8 @@ use super::frames::DepthCache;
 use super::light::{calibrated_light, Consensus};
 use super::options::{BuildOptions, PosesMode};
 use super::scene::BuildScene;
-use crate::camera::Pose;
+use crate::camera::{Camera, Pose};
+use crate::image::reduce::{reduce_frame, reduce_mask};
 use crate::image::Frame;
 use crate::io::poses::PoseEntry;
 use crate::model::registration::{FramePoseResult, PoseRegistration, RoundSummary};
@@ -50,12 +51,11 @@ pub fn register_poses(
     if opts.poses == PosesMode::Fixed || opts.registration_rounds == 0 {
         return Ok(None);
     }
-    // At the working resolution: the registration's finest grid is ~80 points across, and
-    // the frames of a long HD video stay in memory at a fraction of their size.
+    let view = RegistrationView::new(scene);
     let frames: Vec<Frame> = scene
         .case
         .frame_source()?
-        .map(|f| f.map(|f| scene.working_frame(f)))
+        .map(|f| f.map(|f| reduce_frame(&f, view.level, scene.saturation_level)))
         .collect::<std::result::Result<_, _>>()?;
     let given = scene.poses.clone();
     let mut rounds = Vec::new();
@@ -71,7 +71,7 @@ pub fn register_poses(
         if r == 0 {
             given_score = held_out_psnr(scene, &light, opts)?;
         }
-        let (summary, frames_done) = run_round(scene, &frames, kind, &light, opts)?;
+        let (summary, frames_done) = run_round(scene, &view, &frames, kind, &light, opts)?;
         let settled = r > 0
             && summary.median_step_mm < opts.registration_tolerance_mm
             && summary.median_step_deg < 0.1;
@@ -153,10 +153,40 @@ pub fn register_poses(
     }))
 }
 
+/// The resolution frames are registered at: the working one, reduced further to at most
+/// 400 pixels across. The registration's finest grid has ~80 points across (measured on the
+/// 320-pixel demo), so more pixels add nothing but memory: every frame is held in memory for
+/// the rounds (a 1280x720 video: 0.7 MB per frame at 320x180).
+struct RegistrationView {
+    level: usize,
+    camera: Camera,
+    mask: Option<Vec<bool>>,
+}
+
+impl RegistrationView {
+    fn new(scene: &BuildScene) -> RegistrationView {
+        let full = &scene.case.camera;
+        let level = (scene.level..=4)
+            .find(|&l| full.width >> l <= 400 || full.width.min(full.height) >> (l + 1) < 64)
+            .unwrap_or(scene.level);
+        let mask = scene
+            .case
+            .mask
+            .as_ref()
+            .map(|m| reduce_mask(&m.image, full.width as usize, full.height as usize, level));
+        RegistrationView {
+            level,
+            camera: full.at_level(level),
+            mask,
+        }
+    }
+}
+
 /// One round: light and consensus texture at the scene's current poses, then every frame
 /// registered against them as a round of `kind`; the scene's poses are moved to the result.
 fn run_round(
     scene: &mut BuildScene,
+    view: &RegistrationView,
     frames: &[Frame],
     kind: RoundKind,
     light: &CalibratedModel,
@@ -171,9 +201,9 @@ fn run_round(
         tri_uv: &scene.tri_uv,
         texture: Some(&texture),
         light,
-        camera: &scene.camera,
+        camera: &view.camera,
     };
-    let mask = scene.mask.as_deref();
+    let mask = view.mask.as_deref();
     let video = register_round(
         parts,
         frames,
