@@ -16,17 +16,20 @@ use super::frames::DepthCache;
 use super::light::{calibrated_light, Consensus};
 use super::options::{BuildOptions, PosesMode};
 use super::scene::BuildScene;
+use super::tracking::track_poses;
 use crate::camera::Pose;
 use crate::image::Frame;
 use crate::io::poses::PoseEntry;
-use crate::model::registration::{FramePoseResult, PoseRegistration, RoundSummary};
+use crate::math::Affine;
+use crate::model::registration::{FramePoseResult, PoseOverlay, PoseRegistration, RoundSummary};
 use crate::registration::{
     delta_between, register_round, FrameRegistration, FrameStatus, ModelParts, RoundKind,
-    RoundOptions,
+    RoundOptions, TrackState,
 };
 use crate::render::{MipOptions, MipTexture};
 use crate::shading::calibrated::CalibratedModel;
 use crate::shading::{FittedShading, ShadingKind};
+use crate::workflow::registration_overlays::{choose_overlay_frames, pose_overlays};
 use crate::Result;
 use std::time::Instant;
 
@@ -47,16 +50,23 @@ pub fn register_poses(
     opts: &BuildOptions,
     warnings: &mut Vec<String>,
 ) -> Result<Option<PoseRegistration>> {
-    if opts.poses == PosesMode::Fixed || opts.registration_rounds == 0 {
+    let first = opts.poses == PosesMode::First;
+    if opts.poses == PosesMode::Fixed || (!first && opts.registration_rounds == 0) {
         return Ok(None);
     }
     let frames: Vec<Frame> = scene
         .case
         .frame_source()?
         .collect::<std::result::Result<_, _>>()?;
+    // Without a tracker the rounds start from the poses tracked from the first frame's.
+    let (mut statuses, tracking, mut last_light) = if first {
+        let (state, summary, light) = track_poses(scene, &frames, opts, warnings)?;
+        (tracked_statuses(&state), Some(summary), Some(light))
+    } else {
+        (Vec::new(), None, None)
+    };
     let given = scene.poses.clone();
     let mut rounds = Vec::new();
-    let mut last: Vec<FrameRegistration> = Vec::new();
     let mut given_score = None;
     for r in 0..opts.registration_rounds {
         let kind = if r == 0 {
@@ -69,11 +79,15 @@ pub fn register_poses(
             given_score = held_out_psnr(scene, &light, opts)?;
         }
         let (summary, frames_done) = run_round(scene, &frames, kind, &light, opts)?;
+        last_light = Some(light);
         let settled = r > 0
             && summary.median_step_mm < opts.registration_tolerance_mm
             && summary.median_step_deg < 0.1;
         rounds.push(summary);
-        last = frames_done;
+        statuses = frames_done
+            .iter()
+            .map(|f| (f.status.name().to_string(), flagged(f.status)))
+            .collect();
         if settled {
             break;
         }
@@ -88,6 +102,7 @@ pub fn register_poses(
         None => None,
     };
     let kept_given = matches!((given_score, refined_score), (Some(g), Some(r)) if g >= r);
+    let registered = scene.poses.clone();
     if kept_given {
         scene.poses = given.clone();
         scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes);
@@ -97,17 +112,18 @@ pub fn register_poses(
             refined_score.unwrap_or(f64::NAN)
         ));
     }
-    let results: Vec<FramePoseResult> = last
-        .iter()
+    let results: Vec<FramePoseResult> = statuses
+        .into_iter()
         .enumerate()
-        .map(|(i, f)| {
+        .map(|(i, (status, is_flagged))| {
             let d = delta_between(&given[i], &scene.poses[i]);
             FramePoseResult {
                 frame: i,
                 correction_mm: d.mm(),
                 correction_deg: d.deg(),
-                status: f.status.name().to_string(),
-                used: kept_given || !flagged(f.status),
+                status,
+                // Kept given poses are all used, but not a frame the tracker lost.
+                used: !is_flagged || (kept_given && !first),
             }
         })
         .collect();
@@ -121,6 +137,10 @@ pub fn register_poses(
             pose: Pose::new(*p),
         })
         .collect();
+    let overlays = match &last_light {
+        Some(light) => overlays(scene, &frames, light, &given, &registered, &results)?,
+        None => Vec::new(),
+    };
     let keep: Vec<usize> = (0..results.len()).filter(|&i| results[i].used).collect();
     let left_out = results.len() - keep.len();
     if keep.len() < 2 {
@@ -145,6 +165,8 @@ pub fn register_poses(
         kept: if kept_given { "given" } else { "refined" }.to_string(),
         held_out_psnr_given_db: given_score,
         held_out_psnr_refined_db: refined_score,
+        tracking,
+        overlays,
         given,
         refined,
     }))
@@ -228,7 +250,7 @@ fn held_out_psnr(
 
 /// The calibrated light fitted with the scene's current poses (a first pass and the pooled
 /// fit with its refinements).
-fn round_light(
+pub(super) fn round_light(
     scene: &mut BuildScene,
     opts: &BuildOptions,
     warnings: &mut Vec<String>,
@@ -257,7 +279,7 @@ fn round_light(
 
 /// The consensus albedo of every frame de-lit with `light` at the current poses, with its
 /// mip chain: what the texture rounds register against.
-fn consensus_texture(
+pub(super) fn consensus_texture(
     scene: &BuildScene,
     light: &CalibratedModel,
     opts: &BuildOptions,
@@ -270,6 +292,40 @@ fn consensus_texture(
         rgb,
     };
     MipTexture::new(&image, None, opts.atlas.texel_mm, &MipOptions::default())
+}
+
+/// The reports' before/after overlays of the 3 frames with the largest corrections and a
+/// typical one, on the geometry shaded by `light`.
+fn overlays(
+    scene: &BuildScene,
+    frames: &[Frame],
+    light: &CalibratedModel,
+    given: &[Affine],
+    registered: &[Affine],
+    results: &[FramePoseResult],
+) -> Result<Vec<PoseOverlay>> {
+    let parts = ModelParts {
+        scene: &scene.scene,
+        tri_uv: &scene.tri_uv,
+        texture: None,
+        light,
+        camera: &scene.case.camera,
+    };
+    let chosen = choose_overlay_frames(results, 3);
+    pose_overlays(parts, frames, given, registered, &chosen, results, 160)
+}
+
+/// Each frame's status after tracking (`given` for the first) and whether it is flagged.
+fn tracked_statuses(state: &TrackState) -> Vec<(String, bool)> {
+    state
+        .status
+        .iter()
+        .zip(&state.accepted)
+        .map(|(s, &ok)| match s {
+            None => ("given".to_string(), false),
+            Some(s) => (s.name().to_string(), !ok),
+        })
+        .collect()
 }
 
 /// The notes poses.json carries per frame after a registration: correction and status.
