@@ -31,14 +31,29 @@ fn poses_of(entries: &[PoseEntry]) -> Vec<Affine> {
 fn poses_first_tracks_the_video_from_one_pose() {
     let tmp = tempfile::tempdir().unwrap();
     let case_dir = tmp.path().join("case");
-    let case = phantom(&case_dir, PoseNoise::new(0.0, 0.0));
-    let truth = poses_of(&case.poses);
+    // The demo's pace (80 frames over the path, about 1.7 mm apart), first 20 frames kept.
+    let opts = PhantomOptions {
+        frames: 80,
+        width: 128,
+        height: 128,
+        novel_views: 1,
+        ..Default::default()
+    };
+    write_phantom_case(&case_dir, &opts).unwrap();
+    let case = Case::open(&case_dir).unwrap();
+    for e in &case.poses[20..] {
+        let bronchosim::io::poses::FrameRef::Image(p) = &e.frame else {
+            panic!("the phantom writes PNG frames")
+        };
+        std::fs::remove_file(p).unwrap();
+    }
+    let truth = poses_of(&case.poses[..20]);
     // The video without a tracker: poses.json holds the first frame's pose alone.
     write_poses(&case_dir.join("poses.json"), &case.poses[..1], &case_dir).unwrap();
     let refused = Case::open(&case_dir).unwrap_err().to_string();
     assert!(refused.contains("fewer poses than frames"), "{refused}");
     let opened = Case::open_untracked(&case_dir).unwrap();
-    assert_eq!((opened.frame_count(), opened.poses_given), (24, 1));
+    assert_eq!((opened.frame_count(), opened.poses_given), (20, 1));
 
     let opts = BuildOptions {
         poses: PosesMode::First,
@@ -51,7 +66,7 @@ fn poses_first_tracks_the_video_from_one_pose() {
     let s = register_command(&case_dir, &out, &opts).unwrap();
     let tracking = s.registration.tracking.clone().unwrap();
     let tracked = poses_of(&read_poses(&out.join("poses.json"), &case_dir).unwrap());
-    assert_eq!(tracked.len(), 24);
+    assert_eq!(tracked.len(), 20);
     let errors: Vec<(f64, f64)> = tracked
         .iter()
         .zip(&truth)
@@ -60,10 +75,14 @@ fn poses_first_tracks_the_video_from_one_pose() {
     let within_mm = errors.iter().filter(|e| e.0 <= 1.0).count();
     let within_both = errors.iter().filter(|e| e.0 <= 1.0 && e.1 <= 1.0).count();
     println!(
-        "tracked {} of 24 (first lost {:?}); within 1 mm {within_mm}, within 1 mm and 1 deg {within_both}; {:.2} s per frame; errors {:?}",
+        "tracked {} of 20 (first lost {:?}); within 1 mm {within_mm}, within 1 mm and 1 deg {within_both}; {:.2} s per frame; errors {:?}",
         tracking.frames_tracked, tracking.first_lost, tracking.seconds_per_frame, errors
     );
-    assert!(within_mm >= 24, "{within_mm} of 24 frames within 1 mm");
+    // Measured: all 20 frames within 1 mm (median 0.12 mm); 11 also within 1 degree (the
+    // view direction drifts about 0.15 degree per frame).
+    assert!(within_mm >= 20, "{within_mm} of 20 frames within 1 mm");
+    assert!(within_both >= 9, "{within_both} of 20 frames within 1 mm and 1 degree");
+    assert_eq!((tracking.frames_tracked, tracking.first_lost), (20, None));
     let record = std::fs::read_to_string(out.join("registration.json")).unwrap();
     assert!(record.contains("\"frames_tracked\""), "{record}");
 }
@@ -89,8 +108,16 @@ fn register_report_shows_frames_on_the_model_before_and_after() {
         );
     }
     assert_eq!(overlays.len(), 4);
+    // Measured: misfit 0.29 -> 0.21 (frame 10), 0.30 -> 0.30, 0.32 -> 0.29, 0.28 -> 0.22.
     for o in overlays {
         assert_ne!(o.given_png, o.registered_png, "frame {}", o.frame);
+        assert!(
+            o.mismatch_registered < o.mismatch_given,
+            "frame {}: {} vs {}",
+            o.frame,
+            o.mismatch_registered,
+            o.mismatch_given
+        );
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("Before and after"));
