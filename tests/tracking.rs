@@ -81,7 +81,10 @@ fn poses_first_tracks_the_video_from_one_pose() {
     // Measured: all 20 frames within 1 mm (median 0.12 mm); 11 also within 1 degree (the
     // view direction drifts about 0.15 degree per frame).
     assert!(within_mm >= 20, "{within_mm} of 20 frames within 1 mm");
-    assert!(within_both >= 9, "{within_both} of 20 frames within 1 mm and 1 degree");
+    assert!(
+        within_both >= 9,
+        "{within_both} of 20 frames within 1 mm and 1 degree"
+    );
     assert_eq!((tracking.frames_tracked, tracking.first_lost), (20, None));
     let record = std::fs::read_to_string(out.join("registration.json")).unwrap();
     assert!(record.contains("\"frames_tracked\""), "{record}");

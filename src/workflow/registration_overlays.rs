@@ -20,13 +20,17 @@ use crate::registration::pose::rotation_of;
 use crate::registration::ModelParts;
 use crate::{Error, Result};
 
-/// Frames to show: the `largest` used frames with the largest corrections (mm), then the one
+/// Frames to show: the `largest` used frames the registration moved with the largest corrections (mm), then the one
 /// with the median correction; each with why it was chosen.
 pub fn choose_overlay_frames(
     frames: &[FramePoseResult],
     largest: usize,
 ) -> Vec<(usize, &'static str)> {
-    let mut used: Vec<&FramePoseResult> = frames.iter().filter(|f| f.used).collect();
+    // A frame the registration did not move has nothing to show.
+    let mut used: Vec<&FramePoseResult> = frames
+        .iter()
+        .filter(|f| f.used && (f.correction_mm > 0.0 || f.correction_deg > 0.0))
+        .collect();
     used.sort_by(|a, b| b.correction_mm.total_cmp(&a.correction_mm));
     let mut out: Vec<(usize, &'static str)> = used
         .iter()

@@ -66,9 +66,14 @@ pub fn register_poses(
         (Vec::new(), None, None)
     };
     let given = scene.poses.clone();
+    let tracked = statuses.clone();
+    let rounds_to_run = match first {
+        true if !opts.tracking.refine_after => 0,
+        _ => opts.registration_rounds,
+    };
     let mut rounds = Vec::new();
     let mut given_score = None;
-    for r in 0..opts.registration_rounds {
+    for r in 0..rounds_to_run {
         let kind = if r == 0 {
             RoundKind::Geometry
         } else {
@@ -111,6 +116,10 @@ pub fn register_poses(
             given_score.unwrap_or(f64::NAN),
             refined_score.unwrap_or(f64::NAN)
         ));
+    }
+    if kept_given && first {
+        // The tracked poses are kept: so are the tracker's verdicts on them.
+        statuses = tracked;
     }
     let results: Vec<FramePoseResult> = statuses
         .into_iter()

@@ -23,6 +23,11 @@ pub struct TrackingOptions {
     pub fit_frames: usize,
     /// The per-frame tracking.
     pub track: TrackOptions,
+    /// Run the registration's rounds from the tracked poses. Off: measured on the demo
+    /// phantom (BENCHMARKS.md, "Tracking"), rounds from poses tracked 1-2 degrees off in
+    /// view direction and lost after frame 56 flag most frames as outliers and predict
+    /// held-out frames worse (15.2 vs 18.1 dB; the check kept the tracked poses).
+    pub refine_after: bool,
 }
 
 impl Default for TrackingOptions {
@@ -31,6 +36,7 @@ impl Default for TrackingOptions {
             refit_every: 8,
             fit_frames: 8,
             track: TrackOptions::default(),
+            refine_after: false,
         }
     }
 }
