@@ -104,8 +104,8 @@ fn render_geometry(model: &PhotometricModel, grid: &RayGrid, pose: &Affine) -> F
             .light
             .shade(&(to_cam * (p.x - centre)), &(to_cam * p.n));
         let i = 3 * p.ray as usize;
-        for c in 0..3 {
-            img.rgb[i + c] = (s[c] + view.offset[c]) as f32;
+        for (c, v) in img.rgb[i..i + 3].iter_mut().enumerate() {
+            *v = (s[c] + view.offset[c]) as f32;
         }
     }
     img
@@ -123,15 +123,15 @@ fn box_down(frame: &Frame, level: usize, w: u32, h: u32) -> Frame {
             for yy in y * k..((y + 1) * k).min(frame.height as usize) {
                 for xx in x * k..((x + 1) * k).min(fw) {
                     let j = 3 * (yy * fw + xx);
-                    for c in 0..3 {
-                        sum[c] += frame.rgb[j + c];
+                    for (s, v) in sum.iter_mut().zip(&frame.rgb[j..j + 3]) {
+                        *s += v;
                     }
                     n += 1.0;
                 }
             }
             let i = 3 * (y * w as usize + x);
-            for c in 0..3 {
-                out.rgb[i + c] = sum[c] / n.max(1.0);
+            for (o, s) in out.rgb[i..i + 3].iter_mut().zip(sum) {
+                *o = s / n.max(1.0);
             }
         }
     }
@@ -171,9 +171,8 @@ fn checkerboard(frame: &Frame, model: &Frame) -> (Frame, f64) {
                     0.0
                 }
             });
-            for c in 0..3 {
-                let o = frame.rgb[3 * i + c];
-                diff += f64::from((o - m[c]).abs());
+            for (&o, mc) in frame.rgb[3 * i..3 * i + 3].iter().zip(m) {
+                diff += f64::from((o - mc).abs());
                 mean += f64::from(o);
             }
             if (x / square + y / square) % 2 == 1 {
