@@ -71,32 +71,15 @@ pub fn register_poses(
         true if !opts.tracking.refine_after => 0,
         _ => opts.registration_rounds,
     };
-    let mut rounds = Vec::new();
-    let mut given_score = None;
-    for r in 0..rounds_to_run {
-        let kind = if r == 0 {
-            RoundKind::Geometry
-        } else {
-            RoundKind::Texture
-        };
-        let light = round_light(scene, opts, warnings)?;
-        if r == 0 {
-            given_score = held_out_psnr(scene, &light, opts)?;
-        }
-        let (summary, frames_done) = run_round(scene, &frames, kind, &light, opts)?;
-        last_light = Some(light);
-        let settled = r > 0
-            && summary.median_step_mm < opts.registration_tolerance_mm
-            && summary.median_step_deg < 0.1;
-        rounds.push(summary);
-        statuses = frames_done
-            .iter()
-            .map(|f| (f.status.name().to_string(), flagged(f.status)))
-            .collect();
-        if settled {
-            break;
-        }
-    }
+    let (rounds, given_score) = run_rounds(
+        scene,
+        &frames,
+        rounds_to_run,
+        opts,
+        warnings,
+        &mut statuses,
+        &mut last_light,
+    )?;
     // Keep the refined poses only when they predict held-out frames better than the given
     // ones (the same test, with the same held-out frames, as the shading model's choice).
     let refined_score = match given_score {
@@ -179,6 +162,47 @@ pub fn register_poses(
         given,
         refined,
     }))
+}
+
+/// Up to `count` rounds of the alternation from the scene's poses (the first against the
+/// geometry); each frame's status and the last round's light are updated. Returns the
+/// rounds and the held-out PSNR at the poses they started from.
+fn run_rounds(
+    scene: &mut BuildScene,
+    frames: &[Frame],
+    count: usize,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+    statuses: &mut Vec<(String, bool)>,
+    last_light: &mut Option<CalibratedModel>,
+) -> Result<(Vec<RoundSummary>, Option<f64>)> {
+    let mut rounds = Vec::new();
+    let mut given_score = None;
+    for r in 0..count {
+        let kind = if r == 0 {
+            RoundKind::Geometry
+        } else {
+            RoundKind::Texture
+        };
+        let light = round_light(scene, opts, warnings)?;
+        if r == 0 {
+            given_score = held_out_psnr(scene, &light, opts)?;
+        }
+        let (summary, frames_done) = run_round(scene, frames, kind, &light, opts)?;
+        *last_light = Some(light);
+        let settled = r > 0
+            && summary.median_step_mm < opts.registration_tolerance_mm
+            && summary.median_step_deg < 0.1;
+        rounds.push(summary);
+        *statuses = frames_done
+            .iter()
+            .map(|f| (f.status.name().to_string(), flagged(f.status)))
+            .collect();
+        if settled {
+            break;
+        }
+    }
+    Ok((rounds, given_score))
 }
 
 /// One round: light and consensus texture at the scene's current poses, then every frame
