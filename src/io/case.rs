@@ -4,6 +4,7 @@
 use crate::camera::Camera;
 use crate::image::Frame;
 use crate::io::camera_file::{find_camera, read_camera};
+use crate::io::case_untracked::complete_poses;
 use crate::io::ct::{find_ct, read_ct, CtInfo, CtSource};
 use crate::io::frame_source::FrameSource;
 use crate::io::image_mask::{read_case_mask, ImageMask};
@@ -75,6 +76,10 @@ pub struct Case {
     pub poses_path: PathBuf,
     /// Camera→world pose of every frame, in order.
     pub poses: Vec<PoseEntry>,
+    /// How many of `poses` poses.json gave: every frame's, unless the case was opened with
+    /// [`Case::open_untracked`] and poses.json holds fewer (then the others start at the first
+    /// frame's pose, for a tracker to replace).
+    pub poses_given: usize,
     /// Where the frames are.
     pub frames: FramesLocation,
     /// Which pixels of every frame are image (`mask.png`); `None`: all of them.
@@ -85,6 +90,18 @@ impl Case {
     /// Open and validate the case in `dir`: every part present and well-formed, as many poses
     /// as frames, frame size equal to the camera's (checked on PNG headers / the video stream).
     pub fn open(dir: &Path) -> Result<Case> {
+        Case::open_with(dir, false)
+    }
+
+    /// [`Case::open`] for a video without a tracker (`--poses first`): poses.json may hold
+    /// fewer poses than the case has frames, down to the first frame's alone; the frames are
+    /// then every PNG of frames/ in file-name order (or every frame of the video), see
+    /// [`crate::io::case_untracked`].
+    pub fn open_untracked(dir: &Path) -> Result<Case> {
+        Case::open_with(dir, true)
+    }
+
+    fn open_with(dir: &Path, untracked: bool) -> Result<Case> {
         if !dir.is_dir() {
             return Err(Error::missing(dir, "case folder"));
         }
@@ -97,7 +114,13 @@ impl Case {
                 "poses.json (camera-to-world pose of each frame)",
             ));
         }
-        let poses = read_poses(&poses_path, dir)?;
+        let mut poses = read_poses(&poses_path, dir)?;
+        let mut poses_given = poses.len();
+        if untracked {
+            if let Some((all, given)) = complete_poses(dir, &poses_path, &poses)? {
+                (poses, poses_given) = (all, given);
+            }
+        }
         let frames = locate_frames(dir, &poses_path, &poses, &camera)?;
         let mask = read_case_mask(dir, &camera)?;
         let ct_source = find_ct(dir)?;
@@ -111,6 +134,7 @@ impl Case {
             camera,
             poses_path,
             poses,
+            poses_given,
             frames,
             mask,
         })

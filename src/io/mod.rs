@@ -4,6 +4,7 @@ pub mod atomic;
 pub mod camera_file;
 mod camera_opencv;
 pub mod case;
+pub mod case_untracked;
 pub mod ct;
 pub mod dicom;
 pub mod frame_source;

@@ -52,10 +52,59 @@ pub struct PoseRegistration {
     pub held_out_psnr_given_db: Option<f64>,
     /// The same with the refined poses.
     pub held_out_psnr_refined_db: Option<f64>,
+    /// With `--poses first`: how tracking from the first frame's pose went (the "given"
+    /// poses above are then the tracked ones).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracking: Option<TrackingSummary>,
+    /// Before/after overlays of a few frames, for the reports (not written to model.json).
+    #[serde(skip)]
+    pub overlays: Vec<PoseOverlay>,
     /// The poses as given (camera → world, every frame of the case).
     #[serde(skip)]
     pub given: Vec<Affine>,
     /// The refined pose of every frame of the case, with its image or video index.
     #[serde(skip)]
     pub refined: Vec<PoseEntry>,
+}
+
+/// How tracking the video from its first frame's pose went (`--poses first`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TrackingSummary {
+    /// Frames accepted by the tracker (the first, given, included).
+    pub frames_tracked: usize,
+    /// Frames of the video.
+    pub frames: usize,
+    /// The first frame of the first run of flagged frames after which the track was lost
+    /// (`None`: never lost).
+    pub first_lost: Option<usize>,
+    /// Fits of the light and texture the frames were tracked against.
+    pub light_fits: usize,
+    /// Wall time of the tracking (s).
+    pub seconds: f64,
+    /// The same per tracked frame (s).
+    pub seconds_per_frame: f64,
+}
+
+/// One frame shown on the model at its given and at its registered pose (the reports'
+/// before/after overlays; `workflow::registration_overlays`).
+#[derive(Clone, Debug)]
+pub struct PoseOverlay {
+    /// Index of the frame.
+    pub frame: usize,
+    /// Why it was chosen (e.g. "large correction").
+    pub why: String,
+    /// Its correction (mm).
+    pub correction_mm: f64,
+    /// Its correction (degrees).
+    pub correction_deg: f64,
+    /// The frame (PNG bytes, reduced).
+    pub frame_png: Vec<u8>,
+    /// Checkerboard of the frame and the model at the given pose (PNG bytes).
+    pub given_png: Vec<u8>,
+    /// The same at the registered pose.
+    pub registered_png: Vec<u8>,
+    /// Mean absolute difference of frame and model at the given pose over the frame's mean.
+    pub mismatch_given: f64,
+    /// The same at the registered pose.
+    pub mismatch_registered: f64,
 }

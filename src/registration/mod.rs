@@ -5,6 +5,7 @@
 //! ```text
 //! ModelParts (scene, UVs, texture, light, camera) ─ FrameRegistrar ─ refine_frame(frame, pose)
 //!                                                                  └ refine_video(frames, poses)
+//! ModelParts + first pose ─ Tracker ─ track(frames) (no tracker: `--poses first`)
 //! ```
 
 pub mod align;
@@ -17,10 +18,12 @@ pub mod pose;
 pub mod prior;
 pub mod pyramid;
 pub mod rounds;
+pub mod track;
 pub mod video;
 
 pub use frame::{FrameObs, FrameRegistrar, FrameRegistration, FrameStatus, RegistrationOptions};
 pub use photometric::{ModelParts, PhotometricModel};
 pub use pose::{apply_delta, delta_between, pose_error, pose_error_axes, PoseDelta};
 pub use rounds::{register_round, RoundKind, RoundOptions};
+pub use track::{TrackOptions, TrackState, Tracker};
 pub use video::{refine_video, VideoOptions, VideoRegistration};

@@ -8,6 +8,7 @@ pub mod flythrough;
 pub mod new_views_figure;
 pub mod progress;
 pub mod register;
+pub mod registration_overlays;
 pub mod render;
 pub mod report;
 pub mod segment;

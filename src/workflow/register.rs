@@ -10,9 +10,10 @@ use crate::io::atomic::{write_bytes_atomic, write_json_atomic};
 use crate::io::output_dir::OutputDir;
 use crate::io::poses::write_poses_annotated;
 use crate::model::manifest::BuildTimings;
-use crate::model::registration::PoseRegistration;
+use crate::model::registration::{PoseRegistration, TrackingSummary};
 use crate::workflow::build::PosesMode;
 use crate::workflow::build::{pose_notes, register_poses, BuildError, BuildOptions, BuildScene};
+use crate::workflow::registration_overlays::overlays_html;
 use crate::Result;
 
 /// What `register` did.
@@ -33,15 +34,17 @@ pub fn register_command(
     opts: &BuildOptions,
 ) -> Result<RegisterSummary> {
     let started = std::time::Instant::now();
+    if opts.poses == PosesMode::Fixed {
+        return Err(BuildError::Registration(
+            "--poses fixed: nothing to register (use refine or first)".into(),
+        )
+        .into());
+    }
     let out_dir = OutputDir::create(out, opts.force)?;
-    let opts = BuildOptions {
-        poses: PosesMode::Refine,
-        ..opts.clone()
-    };
     let mut timings = BuildTimings::default();
-    let mut scene = BuildScene::prepare(case_dir, &opts, &mut timings)?;
+    let mut scene = BuildScene::prepare(case_dir, opts, &mut timings)?;
     let mut warnings = Vec::new();
-    let registration = register_poses(&mut scene, &opts, &mut warnings)?
+    let registration = register_poses(&mut scene, opts, &mut warnings)?
         .ok_or_else(|| BuildError::Registration("--registration-rounds 0: nothing to do".into()))?;
     write_poses_annotated(
         &out_dir.join("poses.json"),
@@ -79,8 +82,15 @@ pub fn registration_report(reg: &PoseRegistration, case_dir: &Path) -> String {
         reg.frames.len(),
         reg.left_out
     );
+    if let Some(t) = &reg.tracking {
+        html.push_str(&tracking_html(t));
+    }
     html.push_str("<h2>Correction of every frame's pose</h2>");
     html.push_str(&correction_plots(reg));
+    if !reg.overlays.is_empty() {
+        html.push_str("<h2>Before and after: frames on the model</h2>");
+        html.push_str(&overlays_html(&reg.overlays));
+    }
     html.push_str("<h2>Rounds</h2><table><tr><th>round</th><th>against</th><th>median step (mm)</th><th>median step (deg)</th><th>statuses</th><th>s</th></tr>");
     for (i, r) in reg.rounds.iter().enumerate() {
         let counts: Vec<String> = r.counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
@@ -121,6 +131,18 @@ pub fn registration_report(reg: &PoseRegistration, case_dir: &Path) -> String {
         html.push_str("</table>");
     }
     html
+}
+
+/// One paragraph on the tracking from the first pose (`--poses first`).
+pub(crate) fn tracking_html(t: &TrackingSummary) -> String {
+    let lost = match t.first_lost {
+        Some(f) => format!("the track was lost at frame {f}"),
+        None => "the track was never lost".to_string(),
+    };
+    format!(
+        "<p>Tracked from the first frame's pose alone: {} of {} frames accepted; {lost};          {} fits of the light; {:.2} s per frame. The corrections below are from the tracked          poses.</p>",
+        t.frames_tracked, t.frames, t.light_fits, t.seconds_per_frame
+    )
 }
 
 /// Two inline SVG plots of every frame's correction of its given pose: the camera centre's

@@ -14,7 +14,8 @@ use crate::shading::paper::plots::{plot_psi_slices, plot_samples_density};
 use crate::shading::paper::PsiModel;
 use crate::shading::{FittedShading, FrameShading, SampleSet};
 use crate::workflow::new_views_figure::NewViewsFigure;
-use crate::workflow::register::correction_plots;
+use crate::workflow::register::{correction_plots, tracking_html};
+use crate::workflow::registration_overlays::overlays_html;
 use crate::{Error, Result};
 use base64::Engine;
 use std::fmt::Write as _;
@@ -342,7 +343,13 @@ fn registration_section(html: &mut String, reg: &PoseRegistration) {
         reg.left_out,
         reg.frames.len()
     ));
+    if let Some(t) = &reg.tracking {
+        html.push_str(&tracking_html(t));
+    }
     html.push_str(&correction_plots(reg));
+    if !reg.overlays.is_empty() {
+        html.push_str(&overlays_html(&reg.overlays));
+    }
 }
 
 /// Write report.html.

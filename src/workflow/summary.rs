@@ -92,7 +92,18 @@ fn registration_line(reg: &PoseRegistration) -> String {
     mm.sort_by(f64::total_cmp);
     deg.sort_by(f64::total_cmp);
     let mid = mm.len() / 2;
-    format!(
+    let tracked = reg.tracking.as_ref().map_or(String::new(), |t| {
+        format!(
+            "  tracked from the first pose: {} of {} frames, {}, {:.2} s per frame\n",
+            t.frames_tracked,
+            t.frames,
+            t.first_lost
+                .map_or("never lost".to_string(), |f| format!("lost at frame {f}")),
+            t.seconds_per_frame
+        )
+    });
+    tracked
+        + &format!(
         "  poses registered in {} rounds: median correction {:.2} mm / {:.2} deg (largest {:.2} mm / {:.2} deg), {} of {} frames left out\n",
         reg.rounds.len(),
         mm.get(mid).copied().unwrap_or(0.0),

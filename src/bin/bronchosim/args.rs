@@ -197,7 +197,9 @@ pub struct BuildArgs {
     pub truth: Option<PathBuf>,
     /// `refine`: register every frame's pose to the CT before fitting (photometric, against
     /// the light and texture; frames that will not register are left out and counted).
-    /// `fixed`: trust the given poses.
+    /// `fixed`: trust the given poses. `first`: trust only the first frame's pose (a video
+    /// without a tracker; poses.json may hold that pose alone): track the others from it,
+    /// then refine them.
     #[arg(long, value_enum, default_value_t = build_defaults().poses)]
     pub poses: PosesMode,
     /// Most rounds of the registration (light + texture, then every frame's pose).
@@ -219,6 +221,11 @@ pub struct RegisterArgs {
     /// Most rounds (light + texture, then every frame's pose).
     #[arg(long, default_value_t = build_defaults().registration_rounds)]
     pub rounds: usize,
+    /// `refine`: start from every frame's given pose. `first`: trust only the first frame's
+    /// (poses.json may hold that pose alone) and track the others from it before the rounds
+    /// (0 rounds: tracking alone). `fixed` is refused: there would be nothing to do.
+    #[arg(long, value_enum, default_value_t = PosesMode::Refine)]
+    pub poses: PosesMode,
     /// Replace DIR if it exists.
     #[arg(long)]
     pub force: bool,

@@ -99,6 +99,7 @@ fn register(a: RegisterArgs, quiet: bool) -> anyhow::Result<String> {
         force: a.force,
         quiet,
         registration_rounds: a.rounds,
+        poses: a.poses,
         ..Default::default()
     };
     let s = register_command(&a.case, &a.out, &opts)

@@ -26,6 +26,7 @@ mod options;
 mod registration;
 mod scene;
 mod textures;
+mod tracking;
 mod write;
 
 pub use cross_validation::held_out_frames;
@@ -38,6 +39,7 @@ pub use options::{BuildOptions, PosesMode};
 pub use registration::{pose_notes, register_poses};
 pub use scene::BuildScene;
 pub use textures::{FusedAlbedo, Textures};
+pub use tracking::TrackingOptions;
 
 use std::path::Path;
 use std::time::Instant;

@@ -64,6 +64,8 @@ pub struct BuildOptions {
     /// Gain corrections of the light fitted in each registration round (the light's shape is
     /// not refitted there: the rounds only need a light to register against).
     pub registration_light_refinements: usize,
+    /// Tracking from the first pose (`--poses first`).
+    pub tracking: super::tracking::TrackingOptions,
     /// The registration stops when a round moves the median pose less than this (mm) and less
     /// than 0.1 degree.
     pub registration_tolerance_mm: f64,
@@ -123,6 +125,7 @@ impl Default for BuildOptions {
             registration_rounds: 3,
             registration_tolerance_mm: 0.05,
             registration_light_refinements: 0,
+            tracking: Default::default(),
             truth: None,
             force: false,
             quiet: false,
@@ -140,4 +143,8 @@ pub enum PosesMode {
     Refine,
     /// Trust the given poses.
     Fixed,
+    /// Trust only the first frame's pose (a video without a tracker; poses.json may hold
+    /// that pose alone): track the others frame by frame from it against the CT
+    /// (`registration::track`), then refine them like [`PosesMode::Refine`].
+    First,
 }

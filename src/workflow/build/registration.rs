@@ -16,18 +16,21 @@ use super::frames::DepthCache;
 use super::light::{calibrated_light, Consensus};
 use super::options::{BuildOptions, PosesMode};
 use super::scene::BuildScene;
+use super::tracking::track_poses;
 use crate::camera::{Camera, Pose};
 use crate::image::reduce::{reduce_frame, reduce_mask};
 use crate::image::Frame;
 use crate::io::poses::PoseEntry;
-use crate::model::registration::{FramePoseResult, PoseRegistration, RoundSummary};
+use crate::math::Affine;
+use crate::model::registration::{FramePoseResult, PoseOverlay, PoseRegistration, RoundSummary};
 use crate::registration::{
     delta_between, register_round, FrameRegistration, FrameStatus, ModelParts, RoundKind,
-    RoundOptions,
+    RoundOptions, TrackState,
 };
 use crate::render::{MipOptions, MipTexture};
 use crate::shading::calibrated::CalibratedModel;
 use crate::shading::{FittedShading, ShadingKind};
+use crate::workflow::registration_overlays::{choose_overlay_frames, pose_overlays};
 use crate::Result;
 use std::time::Instant;
 
@@ -48,39 +51,33 @@ pub fn register_poses(
     opts: &BuildOptions,
     warnings: &mut Vec<String>,
 ) -> Result<Option<PoseRegistration>> {
-    if opts.poses == PosesMode::Fixed || opts.registration_rounds == 0 {
+    let first = opts.poses == PosesMode::First;
+    if opts.poses == PosesMode::Fixed || (!first && opts.registration_rounds == 0) {
         return Ok(None);
     }
-    let view = RegistrationView::new(scene);
-    let frames: Vec<Frame> = scene
-        .case
-        .frame_source()?
-        .map(|f| f.map(|f| reduce_frame(&f, view.level, scene.saturation_level)))
-        .collect::<std::result::Result<_, _>>()?;
+    let view = RegistrationView::new(scene)?;
+    // Without a tracker the rounds start from the poses tracked from the first frame's.
+    let (mut statuses, tracking, mut last_light) = if first {
+        let (state, summary, light) = track_poses(scene, &view, opts, warnings)?;
+        (tracked_statuses(&state), Some(summary), Some(light))
+    } else {
+        (Vec::new(), None, None)
+    };
     let given = scene.poses.clone();
-    let mut rounds = Vec::new();
-    let mut last: Vec<FrameRegistration> = Vec::new();
-    let mut given_score = None;
-    for r in 0..opts.registration_rounds {
-        let kind = if r == 0 {
-            RoundKind::Geometry
-        } else {
-            RoundKind::Texture
-        };
-        let light = round_light(scene, opts, warnings)?;
-        if r == 0 {
-            given_score = held_out_psnr(scene, &light, opts)?;
-        }
-        let (summary, frames_done) = run_round(scene, &view, &frames, kind, &light, opts)?;
-        let settled = r > 0
-            && summary.median_step_mm < opts.registration_tolerance_mm
-            && summary.median_step_deg < 0.1;
-        rounds.push(summary);
-        last = frames_done;
-        if settled {
-            break;
-        }
-    }
+    let tracked = statuses.clone();
+    let rounds_to_run = match first {
+        true if !opts.tracking.refine_after => 0,
+        _ => opts.registration_rounds,
+    };
+    let (rounds, given_score) = run_rounds(
+        scene,
+        &view,
+        rounds_to_run,
+        opts,
+        warnings,
+        &mut statuses,
+        &mut last_light,
+    )?;
     // Keep the refined poses only when they predict held-out frames better than the given
     // ones (the same test, with the same held-out frames, as the shading model's choice).
     let refined_score = match given_score {
@@ -91,6 +88,7 @@ pub fn register_poses(
         None => None,
     };
     let kept_given = matches!((given_score, refined_score), (Some(g), Some(r)) if g >= r);
+    let registered = scene.poses.clone();
     if kept_given {
         scene.poses = given.clone();
         scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
@@ -100,17 +98,22 @@ pub fn register_poses(
             refined_score.unwrap_or(f64::NAN)
         ));
     }
-    let results: Vec<FramePoseResult> = last
-        .iter()
+    if kept_given && first {
+        // The tracked poses are kept: so are the tracker's verdicts on them.
+        statuses = tracked;
+    }
+    let results: Vec<FramePoseResult> = statuses
+        .into_iter()
         .enumerate()
-        .map(|(i, f)| {
+        .map(|(i, (status, is_flagged))| {
             let d = delta_between(&given[i], &scene.poses[i]);
             FramePoseResult {
                 frame: i,
                 correction_mm: d.mm(),
                 correction_deg: d.deg(),
-                status: f.status.name().to_string(),
-                used: kept_given || !flagged(f.status),
+                status,
+                // Kept given poses are all used, but not a frame the tracker lost.
+                used: !is_flagged || (kept_given && !first),
             }
         })
         .collect();
@@ -124,6 +127,10 @@ pub fn register_poses(
             pose: Pose::new(*p),
         })
         .collect();
+    let overlays = match &last_light {
+        Some(light) => overlays(scene, &view, light, &given, &registered, &results)?,
+        None => Vec::new(),
+    };
     let keep: Vec<usize> = (0..results.len()).filter(|&i| results[i].used).collect();
     let left_out = results.len() - keep.len();
     if keep.len() < 2 {
@@ -148,6 +155,8 @@ pub fn register_poses(
         kept: if kept_given { "given" } else { "refined" }.to_string(),
         held_out_psnr_given_db: given_score,
         held_out_psnr_refined_db: refined_score,
+        tracking,
+        overlays,
         given,
         refined,
     }))
@@ -157,14 +166,17 @@ pub fn register_poses(
 /// 400 pixels across. The registration's finest grid has ~80 points across (measured on the
 /// 320-pixel demo), so more pixels add nothing but memory: every frame is held in memory for
 /// the rounds (a 1280x720 video: 0.7 MB per frame at 320x180).
-struct RegistrationView {
-    level: usize,
-    camera: Camera,
-    mask: Option<Vec<bool>>,
+pub(super) struct RegistrationView {
+    /// Every frame of the case, reduced.
+    pub(super) frames: Vec<Frame>,
+    /// The camera of the reduced frames.
+    pub(super) camera: Camera,
+    /// The case's image mask reduced like the frames.
+    pub(super) mask: Option<Vec<bool>>,
 }
 
 impl RegistrationView {
-    fn new(scene: &BuildScene) -> RegistrationView {
+    fn new(scene: &BuildScene) -> Result<RegistrationView> {
         let full = &scene.case.camera;
         let level = (scene.level..=4)
             .find(|&l| full.width >> l <= 400 || full.width.min(full.height) >> (l + 1) < 64)
@@ -174,12 +186,58 @@ impl RegistrationView {
             .mask
             .as_ref()
             .map(|m| reduce_mask(&m.image, full.width as usize, full.height as usize, level));
-        RegistrationView {
-            level,
+        let frames = scene
+            .case
+            .frame_source()?
+            .map(|f| f.map(|f| reduce_frame(&f, level, scene.saturation_level)))
+            .collect::<std::result::Result<_, _>>()?;
+        Ok(RegistrationView {
+            frames,
             camera: full.at_level(level),
             mask,
+        })
+    }
+}
+
+/// Up to `count` rounds of the alternation from the scene's poses (the first against the
+/// geometry); each frame's status and the last round's light are updated. Returns the
+/// rounds and the held-out PSNR at the poses they started from.
+fn run_rounds(
+    scene: &mut BuildScene,
+    view: &RegistrationView,
+    count: usize,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+    statuses: &mut Vec<(String, bool)>,
+    last_light: &mut Option<CalibratedModel>,
+) -> Result<(Vec<RoundSummary>, Option<f64>)> {
+    let mut rounds = Vec::new();
+    let mut given_score = None;
+    for r in 0..count {
+        let kind = if r == 0 {
+            RoundKind::Geometry
+        } else {
+            RoundKind::Texture
+        };
+        let light = round_light(scene, opts, warnings)?;
+        if r == 0 {
+            given_score = held_out_psnr(scene, &light, opts)?;
+        }
+        let (summary, frames_done) = run_round(scene, view, kind, &light, opts)?;
+        *last_light = Some(light);
+        let settled = r > 0
+            && summary.median_step_mm < opts.registration_tolerance_mm
+            && summary.median_step_deg < 0.1;
+        rounds.push(summary);
+        *statuses = frames_done
+            .iter()
+            .map(|f| (f.status.name().to_string(), flagged(f.status)))
+            .collect();
+        if settled {
+            break;
         }
     }
+    Ok((rounds, given_score))
 }
 
 /// One round: light and consensus texture at the scene's current poses, then every frame
@@ -187,7 +245,6 @@ impl RegistrationView {
 fn run_round(
     scene: &mut BuildScene,
     view: &RegistrationView,
-    frames: &[Frame],
     kind: RoundKind,
     light: &CalibratedModel,
     opts: &BuildOptions,
@@ -206,7 +263,7 @@ fn run_round(
     let mask = view.mask.as_deref();
     let video = register_round(
         parts,
-        frames,
+        &view.frames,
         &light.gains,
         mask,
         &scene.poses,
@@ -261,7 +318,7 @@ fn held_out_psnr(
 
 /// The calibrated light fitted with the scene's current poses (a first pass and the pooled
 /// fit with its refinements).
-fn round_light(
+pub(super) fn round_light(
     scene: &mut BuildScene,
     opts: &BuildOptions,
     warnings: &mut Vec<String>,
@@ -290,7 +347,7 @@ fn round_light(
 
 /// The consensus albedo of every frame de-lit with `light` at the current poses, with its
 /// mip chain: what the texture rounds register against.
-fn consensus_texture(
+pub(super) fn consensus_texture(
     scene: &BuildScene,
     light: &CalibratedModel,
     opts: &BuildOptions,
@@ -303,6 +360,48 @@ fn consensus_texture(
         rgb,
     };
     MipTexture::new(&image, None, opts.atlas.texel_mm, &MipOptions::default())
+}
+
+/// The reports' before/after overlays of the 3 frames with the largest corrections and a
+/// typical one, on the geometry shaded by `light`.
+fn overlays(
+    scene: &BuildScene,
+    view: &RegistrationView,
+    light: &CalibratedModel,
+    given: &[Affine],
+    registered: &[Affine],
+    results: &[FramePoseResult],
+) -> Result<Vec<PoseOverlay>> {
+    let parts = ModelParts {
+        scene: &scene.scene,
+        tri_uv: &scene.tri_uv,
+        texture: None,
+        light,
+        camera: &view.camera,
+    };
+    let chosen = choose_overlay_frames(results, 3);
+    pose_overlays(
+        parts,
+        &view.frames,
+        given,
+        registered,
+        &chosen,
+        results,
+        160,
+    )
+}
+
+/// Each frame's status after tracking (`given` for the first) and whether it is flagged.
+fn tracked_statuses(state: &TrackState) -> Vec<(String, bool)> {
+    state
+        .status
+        .iter()
+        .zip(&state.accepted)
+        .map(|(s, &ok)| match s {
+            None => ("given".to_string(), false),
+            Some(s) => (s.name().to_string(), !ok),
+        })
+        .collect()
 }
 
 /// The notes poses.json carries per frame after a registration: correction and status.

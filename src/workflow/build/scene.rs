@@ -69,7 +69,11 @@ impl BuildScene {
         timings: &mut BuildTimings,
     ) -> Result<BuildScene> {
         let t = Instant::now();
-        let case = Case::open(case_dir)?;
+        let case = if opts.poses == super::options::PosesMode::First {
+            Case::open_untracked(case_dir)?
+        } else {
+            Case::open(case_dir)?
+        };
         timings.read_case = t.elapsed().as_secs_f64();
 
         let seg_opts = SegmentCommandOptions {

@@ -1,0 +1,293 @@
+//! Tracking a video without a tracker (`--poses first`, issue 16 item 5): only the first
+//! frame's pose is known. Each next frame starts from the previous refined poses at constant
+//! velocity (extrapolated from the last two accepted frames) and is registered against the
+//! geometry's shading with its colour-predicted albedo, as the first round of
+//! [`super::rounds`] does (no texture of the later frames exists yet).
+//!
+//! A frame is accepted when its registration converged, its cost lies within `cost_ratio`
+//! of the accepted frames' recent costs, and it moved no further from the prediction than a
+//! bronchoscope moves between frames. A frame that is not accepted is flagged (its pose is the
+//! prediction) and tracking continues from the last accepted poses; after `lost_after`
+//! flagged frames in a row the track is lost from the first of them, and every later frame
+//! is still tried from the last accepted poses (the track may be found again, but the
+//! report names the first frame lost).
+
+use super::chroma::ChromaAlbedo;
+use super::frame::RegistrationOptions;
+use super::frame::{FrameObs, FrameRegistrar, FrameRegistration, FrameStatus};
+use super::photometric::{ModelParts, RayGrid};
+use super::pose::{delta_between, orthonormalise, pose_from, rotation_log, rotation_of};
+use crate::camera::pose::camera_centre;
+use crate::image::Frame;
+use crate::math::{Affine, Rotation3};
+use crate::Result;
+
+/// Options of [`Tracker`].
+#[derive(Clone, Debug)]
+pub struct TrackOptions {
+    /// Per-frame registration (its uniform-albedo settings are set by the tracker).
+    pub frame: RegistrationOptions,
+    /// Weights of the R, G, B residuals against the geometry's shading (red: the least
+    /// albedo; see [`super::rounds::RoundOptions`]).
+    pub channel_weights: [f32; 3],
+    /// A frame whose cost exceeds this many times the median of the last accepted frames'
+    /// costs is not accepted.
+    pub cost_ratio: f64,
+    /// Accepted frames whose costs make that median.
+    pub cost_window: usize,
+    /// A frame whose refined pose is further than this from its prediction (mm) is not
+    /// accepted.
+    pub max_jump_mm: f64,
+    /// The same for the rotation (degrees).
+    pub max_jump_deg: f64,
+    /// Frames flagged in a row after which the track is lost.
+    pub lost_after: usize,
+    /// Register against the texture fused from the frames tracked so far (`false`: against
+    /// the geometry's shading, each frame divided by the albedo its colour predicts). A
+    /// round airway looks the same rolled about the view axis: without texture the roll
+    /// drifts (demo phantom: 2 degrees after 1 frame, 14 after 8, 140 median).
+    pub against_texture: bool,
+    /// Against texture, pyramid levels at or above this one still register against the
+    /// geometry's shading (red channel): the lumen's dark centre pins the view direction,
+    /// which a texture fused from the tracked frames follows when they drift.
+    pub geometry_from_level: usize,
+}
+
+impl Default for TrackOptions {
+    fn default() -> Self {
+        TrackOptions {
+            frame: RegistrationOptions::default(),
+            channel_weights: [1.0, 0.0, 0.0],
+            cost_ratio: 2.5,
+            cost_window: 9,
+            max_jump_mm: 3.0,
+            max_jump_deg: 10.0,
+            lost_after: 3,
+            against_texture: true,
+            geometry_from_level: 2,
+        }
+    }
+}
+
+/// The track so far: one entry per frame of the video.
+#[derive(Clone, Debug)]
+pub struct TrackState {
+    /// Camera → world pose of each frame: refined when accepted, predicted when flagged, the
+    /// first frame's until tracked.
+    pub poses: Vec<Affine>,
+    /// Each frame's gain in the light it was tracked with (carried from the previous frame
+    /// and corrected by its registration).
+    pub gains: Vec<f64>,
+    /// How each frame's registration ended (`None`: not tracked yet; the first frame is
+    /// given).
+    pub status: Vec<Option<FrameStatus>>,
+    /// The frame was accepted (the first frame always is).
+    pub accepted: Vec<bool>,
+    /// Each frame's registration cost at its pose (NaN when not tracked).
+    pub costs: Vec<f64>,
+    /// The first frame of the first run of `lost_after` flagged frames.
+    pub first_lost: Option<usize>,
+    flagged_in_row: usize,
+}
+
+impl TrackState {
+    /// A video of `n` frames whose first frame has the pose `first` and gain `gain`.
+    pub fn new(n: usize, first: Affine, gain: f64) -> TrackState {
+        let mut accepted = vec![false; n];
+        accepted[0] = true;
+        TrackState {
+            poses: vec![first; n],
+            gains: vec![gain; n],
+            status: vec![None; n],
+            accepted,
+            costs: vec![f64::NAN; n],
+            first_lost: None,
+            flagged_in_row: 0,
+        }
+    }
+
+    /// The accepted frames before `f`, in order.
+    pub fn accepted_before(&self, f: usize) -> Vec<usize> {
+        (0..f).filter(|&i| self.accepted[i]).collect()
+    }
+
+    /// The pose of frame `f` at constant velocity from the last two accepted frames before
+    /// it (centre linear, rotation along the geodesic); the last one's pose when only one is.
+    pub fn predict(&self, f: usize) -> Affine {
+        let ok = self.accepted_before(f);
+        match ok.as_slice() {
+            [] => self.poses[0],
+            [a] => self.poses[*a],
+            [.., a, b] => extrapolate(&self.poses[*a], *a, &self.poses[*b], *b, f),
+        }
+    }
+
+    fn median_cost(&self, f: usize, window: usize) -> Option<f64> {
+        let mut c: Vec<f64> = self
+            .accepted_before(f)
+            .into_iter()
+            .rev()
+            .map(|i| self.costs[i])
+            .filter(|c| c.is_finite())
+            .take(window)
+            .collect();
+        if c.is_empty() {
+            return None;
+        }
+        c.sort_by(f64::total_cmp);
+        Some(c[c.len() / 2])
+    }
+}
+
+/// The pose at frame `f` on the constant-velocity motion through `pa` (frame `a`) and `pb`
+/// (frame `b`, `a < b`).
+pub fn extrapolate(pa: &Affine, a: usize, pb: &Affine, b: usize, f: usize) -> Affine {
+    let t = (f as f64 - a as f64) / (b as f64 - a as f64);
+    let (ra, rb) = (rotation_of(pa), rotation_of(pb));
+    let w = rotation_log(&(rb * ra.transpose()));
+    let r = Rotation3::new(w * t).into_inner() * ra;
+    let c = camera_centre(pa).coords * (1.0 - t) + camera_centre(pb).coords * t;
+    pose_from(&orthonormalise(&r), &c)
+}
+
+/// A model to track frames against: the geometry's shading under the light, each frame
+/// divided by the albedo its colour predicts.
+pub struct Tracker<'a> {
+    reg: FrameRegistrar<'a>,
+    /// Without texture: the colour–albedo relation the frames are divided by.
+    chroma: Option<ChromaAlbedo>,
+    opts: TrackOptions,
+}
+
+impl<'a> Tracker<'a> {
+    /// The tracker for `parts` (light and texture fitted on frames already tracked), whose
+    /// colour–albedo relation is fitted on the texture seen from `seen_from`.
+    pub fn new(parts: ModelParts<'a>, seen_from: &[Affine], opts: &TrackOptions) -> Result<Self> {
+        let mut frame_opts = opts.frame.clone();
+        frame_opts.uniform_albedo_from_level = match opts.against_texture {
+            true => opts.geometry_from_level,
+            false => 0,
+        };
+        frame_opts.uniform_channel_weights = opts.channel_weights;
+        let reg = FrameRegistrar::new(parts, frame_opts)?;
+        let chroma = match opts.against_texture {
+            true => None,
+            false => Some(ChromaAlbedo::fit(
+                &reg.model,
+                &RayGrid::new(parts.camera, 2, 1),
+                seen_from,
+            )?),
+        };
+        Ok(Tracker {
+            reg,
+            chroma,
+            opts: opts.clone(),
+        })
+    }
+
+    /// The frame as registered: divided by its colour's albedo when not against texture.
+    fn prepare<'f>(&self, frame: &'f Frame) -> std::borrow::Cow<'f, Frame> {
+        match &self.chroma {
+            Some(c) => std::borrow::Cow::Owned(c.normalise(frame, self.reg.opts.saturation_level)),
+            None => std::borrow::Cow::Borrowed(frame),
+        }
+    }
+
+    /// Register frame `f` from the prediction of `state` (and, when that is not accepted,
+    /// from the last accepted pose); [`TrackState::commit`] records the result.
+    pub fn try_frame(
+        &self,
+        frames: &[Frame],
+        mask: Option<&[bool]>,
+        state: &TrackState,
+        f: usize,
+    ) -> Result<FrameTry> {
+        let o = &self.opts;
+        let last = *state.accepted_before(f).last().unwrap_or(&0);
+        let gain = state.gains[last];
+        let frame = self.prepare(&frames[f]);
+        let obs = FrameObs {
+            frame: &frame,
+            gain,
+            mask,
+        };
+        let predicted = state.predict(f);
+        let gate = state
+            .median_cost(f, o.cost_window)
+            .map(|m| m * o.cost_ratio);
+        let converged = |r: &FrameRegistration| {
+            matches!(r.status, FrameStatus::Converged | FrameStatus::NotConverged)
+                && r.cost_after.is_finite()
+        };
+        let jumped = |r: &FrameRegistration| {
+            let jump = delta_between(&predicted, &r.pose);
+            jump.mm() > o.max_jump_mm || jump.deg() > o.max_jump_deg
+        };
+        let accept = |r: &FrameRegistration| {
+            converged(r) && gate.is_none_or(|g| r.cost_after <= g) && !jumped(r)
+        };
+        let mut best = self.reg.refine_frame(&obs, &predicted)?;
+        let still = state.poses[last];
+        if !accept(&best) && delta_between(&predicted, &still).mm() > 0.05 {
+            // At constant velocity the prediction overshoots when the scope stops.
+            let other = self.reg.refine_frame(&obs, &still)?;
+            if accept(&other) || (!accept(&best) && other.cost_after < best.cost_after) {
+                best = other;
+            }
+        }
+        let accepted = accept(&best);
+        let status = match best.status {
+            _ if accepted => best.status,
+            FrameStatus::Converged | FrameStatus::NotConverged if jumped(&best) => {
+                FrameStatus::Outlier
+            }
+            FrameStatus::Converged | FrameStatus::NotConverged => FrameStatus::HighCost,
+            s => s,
+        };
+        Ok(FrameTry {
+            accepted,
+            status,
+            pose: if accepted { best.pose } else { predicted },
+            gain: if accepted {
+                gain * best.gain_factor
+            } else {
+                gain
+            },
+            cost: best.cost_after,
+        })
+    }
+}
+
+/// One frame's tracking result, before [`TrackState::commit`].
+#[derive(Clone, Copy, Debug)]
+pub struct FrameTry {
+    /// Accepted (see the module docs).
+    pub accepted: bool,
+    /// How it ended (`HighCost` or `Outlier` when it converged but was not accepted).
+    pub status: FrameStatus,
+    /// The refined pose when accepted, else the prediction.
+    pub pose: Affine,
+    /// Its gain.
+    pub gain: f64,
+    /// Its registration cost.
+    pub cost: f64,
+}
+
+impl TrackState {
+    /// Record frame `f`'s result; `lost_after` flagged frames in a row lose the track.
+    pub fn commit(&mut self, f: usize, t: &FrameTry, lost_after: usize) {
+        self.accepted[f] = t.accepted;
+        self.costs[f] = t.cost;
+        self.poses[f] = t.pose;
+        self.gains[f] = t.gain;
+        self.status[f] = Some(t.status);
+        if t.accepted {
+            self.flagged_in_row = 0;
+        } else {
+            self.flagged_in_row += 1;
+            if self.flagged_in_row >= lost_after && self.first_lost.is_none() {
+                self.first_lost = Some(f + 1 - lost_after);
+            }
+        }
+    }
+}
