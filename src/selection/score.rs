@@ -8,10 +8,10 @@ use crate::image::Frame;
 /// Options of [`score_frame`].
 #[derive(Clone, Debug)]
 pub struct ScoreOptions {
-    /// The luminance is averaged over blocks of this many pixels per axis first, for frames
-    /// wider than `reduce_above_width` pixels (noise halves per doubling; blur of a few
-    /// pixels survives).
-    pub reduce_above_width: u32,
+    /// The luminance is averaged over square blocks first so that the frame is about this
+    /// wide (pixels): the mucosa's detail then spans as many pixels at any resolution, and
+    /// the sensor noise shrinks with the block.
+    pub reduced_width: u32,
     /// A channel at or above this linear value is saturated (8-bit 255 decodes to 1.0).
     pub saturated: f32,
     /// Linear luminance below this is dark (about sRGB 13/255).
@@ -21,7 +21,7 @@ pub struct ScoreOptions {
 impl Default for ScoreOptions {
     fn default() -> Self {
         ScoreOptions {
-            reduce_above_width: 400,
+            reduced_width: 320,
             saturated: 0.999,
             dark: 0.004,
         }
@@ -31,9 +31,9 @@ impl Default for ScoreOptions {
 /// The per-frame measurements.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameStats {
-    /// Gradient energy in the frame's least sharp direction (x, y or a diagonal): mean squared
-    /// central difference of the luminance over usable pixels, divided by their mean
-    /// luminance squared (dimensionless). 0 when no pixel is usable.
+    /// Detail in the frame's least sharp direction (x, y or a diagonal): mean squared second
+    /// difference of the luminance over usable pixels, divided by their mean luminance
+    /// squared (dimensionless). 0 when no pixel is usable.
     pub sharpness: f64,
     /// The same in the sharpest direction (a blurred frame keeps it, a flat one does not).
     pub sharpness_max: f64,
@@ -77,11 +77,7 @@ pub fn score_frame(frame: &Frame, mask: Option<&[bool]>, opts: &ScoreOptions) ->
             lum[i] = l;
         }
     }
-    let block = if frame.width > opts.reduce_above_width {
-        (frame.width as usize).div_ceil(opts.reduce_above_width as usize / 2)
-    } else {
-        1
-    };
+    let block = ((frame.width as f64 / opts.reduced_width.max(1) as f64).round() as usize).max(1);
     let (small, sw, sh) = reduce(&lum, w, h, block);
     let (sharpness, sharpness_max) = directional_energy(&small, sw, sh);
     let img = image.max(1) as f64;
@@ -113,9 +109,11 @@ fn reduce(lum: &[f32], w: usize, h: usize, block: usize) -> (Vec<f32>, usize, us
     (out, sw, sh)
 }
 
-/// Mean squared central difference of `lum` along x, y and both diagonals over the pixels
-/// whose two neighbours are usable, each divided by the mean luminance squared; returns the
-/// (least, largest) of the four.
+/// Mean squared second difference of `lum` along x, y and both diagonals over the pixels
+/// whose two neighbours are usable, each divided by the mean luminance squared (diagonals
+/// also by 2, their step being sqrt(2) pixels); returns the (least, largest) of the four.
+/// Second differences ignore the smooth fall-off of the light, so what is left is the
+/// mucosa's detail, which motion blur removes along its direction.
 fn directional_energy(lum: &[f32], w: usize, h: usize) -> (f64, f64) {
     const DIRS: [(isize, isize); 4] = [(1, 0), (0, 1), (1, 1), (1, -1)];
     let mut sum = [0f64; 4];
@@ -132,7 +130,7 @@ fn directional_energy(lum: &[f32], w: usize, h: usize) -> (f64, f64) {
             for (d, &(dx, dy)) in DIRS.iter().enumerate() {
                 let a = lum[(y as isize + dy) as usize * w + (x as isize + dx) as usize];
                 let b = lum[(y as isize - dy) as usize * w + (x as isize - dx) as usize];
-                let g = (a - b) as f64;
+                let g = (a - 2.0 * l + b) as f64;
                 if !g.is_nan() {
                     sum[d] += g * g;
                     count[d] += 1;
@@ -144,10 +142,11 @@ fn directional_energy(lum: &[f32], w: usize, h: usize) -> (f64, f64) {
     if ln == 0 || mean <= 0.0 {
         return (0.0, 0.0);
     }
-    // Diagonal differences are not rescaled: sensor noise, the floor every direction shares,
-    // then weighs the same in all four.
     let e: Vec<f64> = (0..4)
-        .map(|d| sum[d] / count[d].max(1) as f64 / (mean * mean))
+        .map(|d| {
+            let step = if d >= 2 { 0.5 } else { 1.0 };
+            step * sum[d] / count[d].max(1) as f64 / (mean * mean)
+        })
         .collect();
     let lo = e.iter().cloned().fold(f64::INFINITY, f64::min);
     let hi = e.iter().cloned().fold(0.0, f64::max);
@@ -192,13 +191,14 @@ mod tests {
         let f = textured(64, 64);
         let sharp = score_frame(&f, None, &opts);
         let blurred = score_frame(&blur_x(&f, 6), None, &opts);
-        // A 6-pixel box blur of white-ish noise keeps 1/18 of the x-difference energy: two
-        // 6-sample means 2 pixels apart differ by 4 samples / 6, variance 4/36 of 2 var.
+        // On white-ish noise (variance v) a sharp frame's least direction is a diagonal (second
+        // difference variance 6v, halved); a 6-pixel box blur along x leaves 4 samples / 6 in
+        // the x second difference: 4v/36, 1/27 of the sharp frame's 3v.
         assert!(
             blurred.sharpness < 0.2 * sharp.sharpness,
             "{blurred:?} vs {sharp:?}"
         );
-        // Along y the blur averages 6 independent pixels: energy / 6, not zero.
+        // Along y the blur averages 6 independent pixels: 6v / 6, a sixth of 6v, not zero.
         assert!(blurred.sharpness_max > 0.1 * sharp.sharpness_max);
         // Scale-free: twice the light, the same sharpness.
         let mut bright = f.clone();

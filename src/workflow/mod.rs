@@ -11,5 +11,6 @@ pub mod register;
 pub mod render;
 pub mod report;
 pub mod segment;
+pub(crate) mod selection_report;
 pub mod summary;
 pub mod truth_eval;
