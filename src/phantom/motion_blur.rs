@@ -26,7 +26,7 @@ impl Default for MotionBlur {
         MotionBlur {
             share: 0.0,
             length_share: 0.03,
-            max_sub_renders: 12,
+            max_sub_renders: 8,
         }
     }
 }
@@ -103,9 +103,9 @@ mod tests {
         assert_eq!(b.iter().filter(|&&x| x).count(), 60);
         assert_eq!(b, mb.blurred_frames(300, 5));
         assert_ne!(b, mb.blurred_frames(300, 6));
-        // 320 px wide: a smear of 9.6 px in 4 sub-renders; 1280 px: 38.4 px, capped at 12.
+        // 320 px wide: a smear of 9.6 px in 4 sub-renders; 1280 px: 38.4 px, capped at 8.
         assert_eq!(mb.sub_renders(320), 4);
-        assert_eq!(mb.sub_renders(1280), 12);
+        assert_eq!(mb.sub_renders(1280), 8);
         let poses: Vec<Affine> = (0..3)
             .map(|k| {
                 let mut m = Affine::identity();

@@ -27,7 +27,7 @@ mod light_refit;
 mod options;
 mod registration;
 mod scene;
-mod selection;
+pub mod selection;
 mod textures;
 mod write;
 
