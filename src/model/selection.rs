@@ -14,6 +14,10 @@ pub struct SelectedFrame {
     pub used: bool,
     /// Why it was used or not.
     pub reason: Reason,
+    /// Judged `blurred` or `badly_exposed` (also when used: a video within the budget is used
+    /// whole), `None` when healthy.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flagged: Option<String>,
     /// Gradient energy in its least sharp direction over the squared mean luminance.
     pub sharpness: f64,
     /// Sharpness over the median of its neighbours' (1 = as sharp).

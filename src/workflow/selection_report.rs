@@ -47,6 +47,18 @@ pub(crate) fn selection_section(html: &mut String, sel: &FrameSelection) {
         let _ = write!(html, "<td>{c}</td>");
     }
     html.push_str("</tr></table>");
+    let flagged_used = sel
+        .frames
+        .iter()
+        .filter(|f| f.used && f.flagged.is_some())
+        .count();
+    if flagged_used > 0 {
+        let _ = write!(
+            html,
+            "<p>{flagged_used} used frames were judged blurred or badly exposed (kept: no \
+             better frame sees their wall, or the video is within the budget).</p>"
+        );
+    }
     html.push_str(&scores_plot(sel));
 }
 

@@ -18,7 +18,7 @@ use crate::model::selection::{FrameSelection, SelectedFrame};
 use crate::raycast::{cast_frame_with, RayTable};
 use crate::registration::pyramid::level_camera;
 use crate::selection::{
-    choose_frames, judge_frames, needs_coverage, score_frame, CoverState, CoverageGrid,
+    choose_frames, judge_frames, needs_coverage, score_frame, CoverState, CoverageGrid, Failure,
     FrameCoverage, FrameStats, Reason, WallHit,
 };
 use crate::workflow::progress::Progress;
@@ -81,6 +81,14 @@ pub fn select_frames(
             frame: i,
             used: keep.is_empty() || decisions[i].reason == Reason::Chosen,
             reason: decisions[i].reason,
+            flagged: judged[i].failure.map(|f| {
+                match f {
+                    Failure::Blurred => Reason::Blurred,
+                    Failure::BadlyExposed => Reason::BadlyExposed,
+                }
+                .name()
+                .to_string()
+            }),
             sharpness: stats[i].sharpness,
             relative_sharpness: judged[i].relative_sharpness,
             saturated_share: stats[i].saturated_share,
