@@ -127,7 +127,12 @@ fn max_frames_zero_builds_the_same_model_as_a_budget_above_the_frames() {
     build("budget", "50");
     let read = |m: &str, f: &str| std::fs::read(dir.join(m).join(f)).unwrap();
     assert_eq!(read("all", "albedo.png"), read("budget", "albedo.png"));
-    assert_eq!(read("all", "shading.json"), read("budget", "shading.json"));
+    // shading.json to the last digits: the fit's parallel sums may round differently from run
+    // to run (seen in debug builds, 1 ulp), with or without a selection.
+    let shading = |m: &str| -> serde_json::Value {
+        serde_json::from_slice(&read(m, "shading.json")).unwrap()
+    };
+    assert_close(&shading("all"), &shading("budget"), "shading.json");
     let json =
         |m: &str| -> serde_json::Value { serde_json::from_slice(&read(m, "model.json")).unwrap() };
     let (all, budget) = (json("all"), json("budget"));
@@ -136,4 +141,31 @@ fn max_frames_zero_builds_the_same_model_as_a_budget_above_the_frames() {
     assert_eq!(sel["used"], 8);
     assert_eq!(sel["counts"]["chosen"], 8);
     assert_eq!(budget["counts"]["frames"], 8);
+}
+
+/// `a` and `b` have the same structure and numbers within 1e-9 (relative).
+fn assert_close(a: &serde_json::Value, b: &serde_json::Value, at: &str) {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+            assert!(
+                (x - y).abs() <= 1e-9 * x.abs().max(y.abs()).max(1e-300),
+                "{at}: {x} vs {y}"
+            );
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            assert_eq!(x.len(), y.len(), "{at}");
+            for (i, (u, v)) in x.iter().zip(y).enumerate() {
+                assert_close(u, v, &format!("{at}[{i}]"));
+            }
+        }
+        (Value::Object(x), Value::Object(y)) => {
+            assert_eq!(x.len(), y.len(), "{at}");
+            for (k, u) in x {
+                assert_close(u, &y[k], &format!("{at}.{k}"));
+            }
+        }
+        _ => assert_eq!(a, b, "{at}"),
+    }
 }

@@ -171,7 +171,7 @@ pub fn choose_frames(
     let used = picked.len();
     // Failed frames, only for wall no chosen frame sees.
     let (picked, gains) = greedy_cover(
-        &coverage,
+        coverage,
         &weights,
         &failed,
         budget.saturating_sub(used),
