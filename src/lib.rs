@@ -17,6 +17,7 @@ pub mod raycast;
 pub mod registration;
 pub mod render;
 pub mod rng;
+pub mod selection;
 pub mod shading;
 pub mod texture;
 pub mod viewer;

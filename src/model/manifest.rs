@@ -2,6 +2,7 @@
 //! `build` writes and `render`, `flythrough` and `evaluate` read back.
 
 use crate::model::registration::PoseRegistration;
+use crate::model::selection::FrameSelection;
 use serde::{Deserialize, Serialize};
 
 use crate::camera::Camera;
@@ -41,6 +42,9 @@ pub struct BuildTimings {
     pub mesh: f64,
     /// Atlas and texel rasterisation.
     pub atlas: f64,
+    /// Frame selection: scoring every frame, the coverage cast, the choice.
+    #[serde(default)]
+    pub selection: f64,
     /// Registration of the poses to the CT (every round: light, texture, poses).
     #[serde(default)]
     pub registration: f64,
@@ -102,6 +106,10 @@ pub struct ModelManifest {
     /// How the poses were registered to the CT (`None`: trusted as given, `--poses fixed`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub registration: Option<PoseRegistration>,
+    /// Which frames were used and why the others were not (absent when every frame was used
+    /// without a selection, `--max-frames 0`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame_selection: Option<FrameSelection>,
     /// What the build could not do as asked (e.g. a failed calibrated fit).
     pub warnings: Vec<String>,
     /// Mean L2 stretch of the atlas.

@@ -5,6 +5,7 @@ pub mod cross_validation;
 pub mod load;
 pub mod manifest;
 pub mod registration;
+pub mod selection;
 
 pub use load::Model;
 pub use manifest::{ModelManifest, MODEL_FORMAT_VERSION};

@@ -13,20 +13,15 @@ use super::albedo::MucosaAlbedo;
 use super::ct_volume::{make_ct_phantom, CtPhantomOptions};
 use super::from_mask::{ct_from_mask_file, FromMaskOptions};
 use super::mask_path::mask_centreline;
-use super::overlay::ScopeOverlay;
+use super::motion_blur::MotionBlur;
 use super::path::{camera_path, novel_views, tree_centreline, PathOptions, SmoothPath};
-use super::pose_noise::{tracker_poses, PoseNoise};
-use super::render::{auto_gain, expose, render_radiance, LightModel, SensorModel, SubpixelRays};
+use super::pose_noise::PoseNoise;
+use super::render::{LightModel, SensorModel};
 use super::truth_mesh::{mask_truth_mesh, tree_truth_mesh};
 use crate::camera::Camera;
-use crate::camera::Pose;
 use crate::image::Frame;
-use crate::io::camera_file::write_camera_json;
-use crate::io::image_mask::MASK_FILE;
 use crate::io::nifti::write_nifti;
-use crate::io::png::write_png_srgb8;
-use crate::io::poses::{write_poses, FrameRef, PoseEntry};
-use crate::math::{Affine, Point3};
+use crate::math::Point3;
 use crate::mesh::TriMesh;
 use crate::raycast::Scene;
 use crate::volume::Volume;
@@ -35,7 +30,9 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+mod frames;
 mod truth;
+use frames::{write_frames, FrameGain};
 use truth::{write_manifest, write_truth};
 
 /// Options of [`write_phantom_case`].
@@ -76,6 +73,8 @@ pub struct PhantomOptions {
     /// Tracker-like error of the poses written to poses.json (the true ones go to
     /// truth/poses.json either way); zero by default.
     pub pose_noise: PoseNoise,
+    /// Motion blur of a share of the frames (none by default).
+    pub motion_blur: MotionBlur,
     /// Replace an existing `out` folder.
     pub force: bool,
 }
@@ -102,6 +101,7 @@ impl Default for PhantomOptions {
             path: PathOptions::default(),
             scope_overlay: false,
             pose_noise: PoseNoise::new(0.0, 0.0),
+            motion_blur: MotionBlur::default(),
             force: false,
         }
     }
@@ -124,6 +124,8 @@ pub struct PhantomSummary {
     pub frame_mean_linear: Vec<f64>,
     /// Fraction of pixels with a saturated channel in each frame.
     pub frame_saturated_fraction: Vec<f64>,
+    /// Frames with motion blur (indices).
+    pub blurred_frames: Vec<usize>,
     /// Seconds: CT, truth mesh, path, frames, truth views, writing the CT.
     pub seconds: [f64; 6],
 }
@@ -143,14 +145,6 @@ pub fn phantom_camera(width: u32, height: u32) -> Camera {
         p2: 0.0,
         k3: 0.0,
     }
-}
-
-#[derive(Serialize)]
-struct FrameGain {
-    image: String,
-    gain: f64,
-    mean_linear: f64,
-    saturated_fraction: f64,
 }
 
 /// The mucosa albedo of the phantom case made with master seed `seed` (`truth.json` "seed").
@@ -301,72 +295,6 @@ fn make_anatomy(opts: &PhantomOptions, sm: &mut PhantomSummary) -> Result<Anatom
             })
         }
     }
-}
-
-/// Render, expose (auto gain, sensor noise, the scope's overlay if asked) and write a frame
-/// per pose, then poses.json, camera.json and mask.png (with the overlay). Records each
-/// frame's statistics in `sm` and returns each frame's gain.
-fn write_frames(
-    dir: &Path,
-    stage: &Stage,
-    camera: &Camera,
-    poses: &[Affine],
-    sm: &mut PhantomSummary,
-) -> Result<Vec<FrameGain>> {
-    let opts = stage.opts;
-    let rays = SubpixelRays::new(camera, opts.supersample);
-    let frames_dir = dir.join("frames");
-    std::fs::create_dir_all(&frames_dir).map_err(|e| Error::io(&frames_dir, e))?;
-    let mut entries = Vec::with_capacity(poses.len());
-    let mut true_entries = Vec::with_capacity(poses.len());
-    // What a tracker would report (the frames are rendered from the true poses).
-    let reported = tracker_poses(
-        poses,
-        &opts.pose_noise,
-        opts.seed.wrapping_mul(613).wrapping_add(29),
-    );
-    let mut gains = Vec::with_capacity(poses.len());
-    let noise_seed = opts.seed.wrapping_mul(7919).wrapping_add(1);
-    let overlay = opts
-        .scope_overlay
-        .then(|| ScopeOverlay::new(opts.width, opts.height));
-    if let Some(o) = &overlay {
-        write_png_srgb8(&dir.join(MASK_FILE), &o.mask())?;
-    }
-    for (i, pose) in poses.iter().enumerate() {
-        let rad = render_radiance(&stage.scene, &rays, pose, &stage.albedo, &opts.light);
-        let gain = auto_gain(&rad.frame, &opts.sensor);
-        let mut img = expose(&rad.frame, gain, &opts.sensor, true, noise_seed, i as u64);
-        if let Some(o) = &overlay {
-            o.apply(&mut img, i, 25.0);
-        }
-        let path = frames_dir.join(format!("{i:06}.png"));
-        write_png_srgb8(&path, &img)?;
-        let (mean, sat) = frame_stats(&img);
-        sm.frame_mean_linear.push(mean);
-        sm.frame_saturated_fraction.push(sat);
-        gains.push(FrameGain {
-            image: format!("frames/{i:06}.png"),
-            gain,
-            mean_linear: mean,
-            saturated_fraction: sat,
-        });
-        true_entries.push(PoseEntry {
-            frame: FrameRef::Image(path.clone()),
-            pose: Pose::new(*pose),
-        });
-        entries.push(PoseEntry {
-            frame: FrameRef::Image(path),
-            pose: Pose::new(reported[i]),
-        });
-    }
-    write_poses(&dir.join("poses.json"), &entries, dir)?;
-    let truth = dir.join("truth");
-    std::fs::create_dir_all(&truth).map_err(|e| Error::io(&truth, e))?;
-    write_poses(&truth.join("poses.json"), &true_entries, dir)?;
-    write_camera_json(&dir.join("camera.json"), camera)?;
-    sm.frames = entries.len();
-    Ok(gains)
 }
 
 /// Mean linear luminance and the fraction of pixels with a channel at 1.0.

@@ -10,6 +10,7 @@ pub mod case;
 pub mod ct_volume;
 pub mod from_mask;
 pub mod mask_path;
+pub mod motion_blur;
 pub mod overlay;
 pub mod path;
 pub mod pose_noise;

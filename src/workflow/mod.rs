@@ -12,5 +12,6 @@ pub mod registration_overlays;
 pub mod render;
 pub mod report;
 pub mod segment;
+pub(crate) mod selection_report;
 pub mod summary;
 pub mod truth_eval;

@@ -402,6 +402,9 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
         (0.0, 1.0),
     ));
     frame_figures(&mut html, inputs, tmp.path())?;
+    if let Some(sel) = &m.frame_selection {
+        crate::workflow::selection_report::selection_section(&mut html, sel);
+    }
     if let Some(reg) = &m.registration {
         registration_section(&mut html, reg);
     }
@@ -415,13 +418,14 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
     let _ = write!(
         html,
         "<h2>Timings (s)</h2><table><tr><th>read case</th><th>segment</th><th>mesh</th><th>atlas</th>\
-         <th>registration</th><th>fit Psi</th><th>calibrated light</th><th>cross-validation</th><th>de-light + fuse</th>\
-         </tr><tr><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td>\
+         <th>frame selection</th><th>registration</th><th>fit Psi</th><th>calibrated light</th><th>cross-validation</th><th>de-light + fuse</th>\
+         </tr><tr><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td>\
          <td>{:.2}</td><td>{:.2}</td><td>{:.2}</td></tr></table>",
         t.read_case,
         t.segment,
         t.mesh,
         t.atlas,
+        t.selection,
         t.registration,
         t.fit,
         t.calibrated_fit,

@@ -205,6 +205,12 @@ pub struct BuildArgs {
     /// Most rounds of the registration (light + texture, then every frame's pose).
     #[arg(long, default_value_t = build_defaults().registration_rounds)]
     pub registration_rounds: usize,
+    /// Most frames the model is built from: every frame is scored (sharpness against its
+    /// neighbours, exposure) and the frames that add the most coverage of the wall are kept;
+    /// blurred or badly exposed frames only where nothing better sees the wall (model.json
+    /// `frame_selection` says why each frame was or was not used). 0: every frame.
+    #[arg(long, default_value_t = build_defaults().selection.max_frames)]
+    pub max_frames: usize,
     /// Replace an existing model folder.
     #[arg(long)]
     pub force: bool,
@@ -280,6 +286,11 @@ pub struct PhantomArgs {
     /// RMS rotation error (degrees) of the poses written to poses.json.
     #[arg(long, default_value_t = 0.0)]
     pub pose_noise_deg: f64,
+    /// Share of the frames (0 to 1, drawn with the seed) with motion blur: the average of
+    /// sub-renders along a fast turn of the scope during the exposure, the pose in poses.json
+    /// its middle; truth/truth.json `motion_blur.frames` lists them.
+    #[arg(long, default_value_t = 0.0)]
+    pub motion_blur_share: f64,
     /// Replace CASE if it exists.
     #[arg(long)]
     pub force: bool,

@@ -81,6 +81,7 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
         registration_rounds: a.registration_rounds,
         ..Default::default()
     };
+    opts.selection.max_frames = a.max_frames;
     opts.atlas.texel_mm = a.texel_mm;
     opts.segment.mesh.decimate.target_edge_mm = a.edge_mm;
     opts.calibrated.ambient = a.ambient;
@@ -166,6 +167,12 @@ fn phantom(a: PhantomArgs) -> anyhow::Result<String> {
             a.pose_noise_deg
         );
     }
+    if !(0.0..=1.0).contains(&a.motion_blur_share) {
+        anyhow::bail!(
+            "--motion-blur-share {}: expected a share between 0 and 1",
+            a.motion_blur_share
+        );
+    }
     let mut opts = PhantomOptions {
         frames: a.frames,
         seed: a.seed,
@@ -178,6 +185,7 @@ fn phantom(a: PhantomArgs) -> anyhow::Result<String> {
     };
     (opts.width, opts.height) = a.size.unwrap_or((opts.width, opts.height));
     opts.mask.downsample = a.downsample;
+    opts.motion_blur.share = a.motion_blur_share;
     let t = std::time::Instant::now();
     let summary = write_phantom_case(&a.out, &opts)
         .with_context(|| format!("phantom {}", a.out.display()))?;

@@ -111,10 +111,17 @@ pub(super) fn write_manifest(
         "supersample": opts.supersample,
         "truth_grid_mm": opts.truth_grid_mm,
         "pose_noise": &opts.pose_noise,
+        "motion_blur": {
+            "share": opts.motion_blur.share,
+            "length_share": opts.motion_blur.length_share,
+            "sub_renders": opts.motion_blur.sub_renders(opts.width),
+            "frames": &sm.blurred_frames,
+        },
         "files": {
             "lumen.ply": "true lumen mesh, world mm (RAS+), normals into the lumen",
             "albedo_vertices.ply": "the same mesh with float red, green, blue: linear albedo per vertex",
             "gains.json": "per-frame auto-gain, light and sensor model",
+            "motion_blur.frames": "frames averaged over sub-renders along the exposure's motion (a fast turn plus the path's travel, symmetric about the frame's pose in poses.json)",
             "poses.json": "the true pose of every frame, images relative to the case folder (the case's poses.json has pose_noise added)",
             "views.json": "novel view poses (camera_to_world), images relative to truth/",
             "camera.json": "pinhole camera of the views (no distortion)",

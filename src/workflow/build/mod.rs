@@ -3,6 +3,8 @@
 //!
 //! ```text
 //! read, segment, mesh, atlas ─► BuildScene        (scene.rs)
+//! choose the frames          ─► FrameSelection    (selection.rs: scores, coverage, budget;
+//!                                                  frames not chosen are left out)
 //! register the poses to CT   ─► PoseRegistration  (registration.rs: rounds of light, texture,
 //!                                                  every frame's pose; flagged frames left out)
 //! first pass over the frames ─► FitPass + pooled samples   (fit_pass.rs: ray cast, Psi per frame)
@@ -25,6 +27,7 @@ mod light_refit;
 mod options;
 mod registration;
 mod scene;
+pub mod selection;
 mod textures;
 mod tracking;
 mod write;
@@ -63,6 +66,9 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
             scene.case.ct_source.path().display()
         ));
     }
+    let selection = timed(&mut timings.selection, || {
+        selection::select_frames(&mut scene, opts, &mut warnings)
+    })?;
     let registration = timed(&mut timings.registration, || {
         registration::register_poses(&mut scene, opts, &mut warnings)
     })?;
@@ -85,6 +91,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         pass: &pass,
         shading: &shading,
         light_fit,
+        selection,
         registration,
         cross_validation,
         textures: &textures,

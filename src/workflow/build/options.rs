@@ -1,12 +1,16 @@
 //! The options of the whole build: every stage's options with their defaults (the one place
 //! each default number is written; the command line takes its defaults from here).
 
+use crate::selection::SelectionOptions;
 use crate::shading::calibrated::{CalibratedOptions, PoolOptions};
 use crate::shading::paper::FitOptions;
 use crate::shading::{SampleOptions, ShadingKind};
 use crate::texture::atlas::AtlasOptions;
 use crate::texture::fusion::{FusionMethod, FusionOptions, DEFAULT_WEIGHT_EXPONENT};
 use crate::workflow::segment::SegmentCommandOptions;
+
+/// Most frames a build uses by default (`--max-frames`).
+pub const DEFAULT_MAX_FRAMES: usize = 200;
 
 /// Options of the whole build; every stage's options with their defaults.
 #[derive(Clone, Debug)]
@@ -57,6 +61,8 @@ pub struct BuildOptions {
     pub working_level: Option<usize>,
     /// Memory for depth buffers kept between passes (bytes); beyond it frames are ray cast again.
     pub depth_cache_bytes: usize,
+    /// Frame selection (`selection.max_frames` = 0: every frame, no selection).
+    pub selection: SelectionOptions,
     /// Trust the given poses, or refine them against the CT first.
     pub poses: PosesMode,
     /// Most rounds of the registration (light + texture, then every frame's pose).
@@ -117,6 +123,10 @@ impl Default for BuildOptions {
             cross_validate_max_frames: 24,
             working_level: None,
             depth_cache_bytes: 1 << 30,
+            selection: SelectionOptions {
+                max_frames: DEFAULT_MAX_FRAMES,
+                ..Default::default()
+            },
             // Refined by default, kept only when the refined poses predict held-out frames
             // better than the given ones. Demo phantom (BENCHMARKS.md, "Registration"): with
             // 1.5 mm / 2 degrees of tracker error, new views 20.38 -> 27.17 dB; with exact

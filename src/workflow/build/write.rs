@@ -18,6 +18,7 @@ use crate::model::manifest::{
     ModelInputs, ModelManifest, MODEL_FORMAT_VERSION, PAPER_TEXTURE_FILE,
 };
 use crate::model::registration::PoseRegistration;
+use crate::model::selection::FrameSelection;
 use crate::model::Model;
 use crate::shading::FittedShading;
 use crate::texture::output::{encode_albedo, write_texture_outputs};
@@ -35,6 +36,8 @@ pub struct BuiltModel<'a> {
     pub shading: &'a FittedShading,
     /// How the calibrated light was fitted, when it was.
     pub light_fit: Option<LightFitSettings>,
+    /// Which frames were used, when a selection ran.
+    pub selection: Option<FrameSelection>,
     /// How the poses were registered, when they were.
     pub registration: Option<PoseRegistration>,
     /// The cross-validation of the shading models, when it ran.
@@ -139,6 +142,7 @@ fn write_model_files(out_dir: &OutputDir, built: &BuiltModel) -> Result<ModelMan
         cross_validation: built.cross_validation.clone(),
         light_fit: built.light_fit.clone(),
         registration: built.registration.clone(),
+        frame_selection: built.selection.clone(),
         warnings: built.warnings.clone(),
         atlas_mean_l2_stretch: atlas.stats.mean_l2_stretch,
         atlas_utilisation: atlas.stats.utilisation,

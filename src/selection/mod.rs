@@ -1,0 +1,274 @@
+//! Frame selection for long videos (issue 21): which frames a build uses.
+//!
+//! Steps, each on plain data: (1) [`score::score_frame`] measures every decoded frame once
+//! (sharpness in its least sharp direction, saturated and dark shares inside the mask);
+//! (2) [`judge::judge_frames`] compares each frame's sharpness with its neighbours' in time and
+//! gives it a score and possibly a hard failure (blurred, badly exposed); (3) the caller
+//! ray casts each frame on a coarse grid into a [`coverage::FrameCoverage`] (the wall cells it
+//! sees and how well); (4) [`choose_frames`] picks, under the budget, the frames that add the
+//! most coverage weighted by their scores ([`greedy`]). Frames with a hard failure are only
+//! considered afterwards, for wall no healthy chosen frame sees at all. A video within the
+//! budget is used whole.
+
+pub mod coverage;
+pub mod greedy;
+pub mod judge;
+pub mod score;
+
+pub use coverage::{CoverageGrid, FrameCoverage, WallHit};
+pub use greedy::{greedy_cover, CoverState, GainOver};
+pub use judge::{judge_frames, Failure, JudgeOptions, Judgement};
+pub use score::{score_frame, FrameStats, ScoreOptions};
+
+/// Options of the frame selection.
+#[derive(Clone, Debug)]
+pub struct SelectionOptions {
+    /// Most frames used (0: every frame, no selection runs).
+    pub max_frames: usize,
+    /// Per-frame measurements.
+    pub score: ScoreOptions,
+    /// Blur and exposure verdicts.
+    pub judge: JudgeOptions,
+    /// Views kept per wall cell: a frame adds coverage when it sees a cell better than the
+    /// cell's K-th best chosen view (1: only the best view counts).
+    pub views_per_cell: usize,
+    /// A frame adds no coverage when its gain is below this share of the mean healthy
+    /// frame's value on an empty wall.
+    pub min_gain_share: f64,
+    /// Edge of a coverage cell on the wall (mm).
+    pub cell_mm: f64,
+    /// Most rays per frame of the coverage ray cast (the camera is reduced by powers of two
+    /// until it has no more pixels than this).
+    pub max_rays: usize,
+}
+
+impl Default for SelectionOptions {
+    fn default() -> Self {
+        SelectionOptions {
+            max_frames: 0,
+            score: ScoreOptions::default(),
+            judge: JudgeOptions::default(),
+            views_per_cell: 2,
+            min_gain_share: 0.01,
+            cell_mm: 1.0,
+            max_rays: 8192,
+        }
+    }
+}
+
+/// Why a frame is used or not.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Reason {
+    /// Used.
+    Chosen,
+    /// Far less sharp than its neighbours, and its wall is seen by better frames.
+    Blurred,
+    /// Mostly saturated or dark, and its wall is seen by better frames.
+    BadlyExposed,
+    /// The chosen frames already see its wall as well.
+    NoNewCoverage,
+    /// It would add coverage, but the budget was spent on frames that add more.
+    OverBudget,
+}
+
+impl Reason {
+    /// Every reason, in report order.
+    pub const ALL: [Reason; 5] = [
+        Reason::Chosen,
+        Reason::Blurred,
+        Reason::BadlyExposed,
+        Reason::NoNewCoverage,
+        Reason::OverBudget,
+    ];
+
+    /// The name used in model.json and the report.
+    pub fn name(self) -> &'static str {
+        match self {
+            Reason::Chosen => "chosen",
+            Reason::Blurred => "blurred",
+            Reason::BadlyExposed => "badly_exposed",
+            Reason::NoNewCoverage => "adds_no_coverage",
+            Reason::OverBudget => "over_budget",
+        }
+    }
+}
+
+/// The decision on one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Decision {
+    /// Why (used = `Reason::Chosen`).
+    pub reason: Reason,
+    /// Coverage the frame added when chosen, or would have added at the end (weighted
+    /// quality summed over cells).
+    pub gain: f64,
+}
+
+/// True when [`choose_frames`] needs every frame's coverage: more frames than the budget
+/// (within it every frame is used: a short video's neighbouring frames are too far apart in
+/// content for their sharpness to be compared; the 80-frame demo has sharp frames at 0.52
+/// of their neighbours').
+pub fn needs_coverage(judged: &[Judgement], max_frames: usize) -> bool {
+    max_frames > 0 && judged.len() > max_frames
+}
+
+/// Decide every frame: `judged` from [`judge_frames`], `coverage` one per frame on a grid
+/// of `cells` cells (may be empty when [`needs_coverage`] is false).
+pub fn choose_frames(
+    judged: &[Judgement],
+    coverage: &[FrameCoverage],
+    cells: usize,
+    opts: &SelectionOptions,
+) -> Vec<Decision> {
+    let n = judged.len();
+    let budget = if opts.max_frames == 0 {
+        n
+    } else {
+        opts.max_frames
+    };
+    let chosen = |gain| Decision {
+        reason: Reason::Chosen,
+        gain,
+    };
+    if !needs_coverage(judged, budget) || coverage.len() != n {
+        return vec![chosen(0.0); n];
+    }
+    // From here on there are more frames than the budget.
+    let weights: Vec<f64> = judged.iter().map(|j| j.score).collect();
+    let (healthy, failed): (Vec<usize>, Vec<usize>) =
+        (0..n).partition(|&i| judged[i].failure.is_none());
+    let mean_value = healthy
+        .iter()
+        .map(|&i| weights[i] * coverage[i].total())
+        .sum::<f64>()
+        / healthy.len().max(1) as f64;
+    let min_gain = (opts.min_gain_share * mean_value).max(1e-9);
+    let mut state = CoverState::new(cells, opts.views_per_cell);
+    let mut decisions: Vec<Decision> = vec![chosen(0.0); n];
+    let (picked, gains) = greedy_cover(
+        coverage,
+        &weights,
+        &healthy,
+        budget,
+        min_gain,
+        GainOver::AnyCell,
+        &mut state,
+    );
+    let spent = picked.len() >= budget;
+    for &i in &healthy {
+        decisions[i] = Decision {
+            reason: if gains[i] >= min_gain && spent {
+                Reason::OverBudget
+            } else {
+                Reason::NoNewCoverage
+            },
+            gain: gains[i],
+        };
+    }
+    for &i in &picked {
+        decisions[i] = chosen(gains[i]);
+    }
+    let used = picked.len();
+    // Failed frames, only for wall no chosen frame sees.
+    let (picked, gains) = greedy_cover(
+        coverage,
+        &weights,
+        &failed,
+        budget.saturating_sub(used),
+        min_gain,
+        GainOver::UnseenCells,
+        &mut state,
+    );
+    for &i in &failed {
+        decisions[i] = Decision {
+            reason: match judged[i].failure {
+                Some(Failure::Blurred) => Reason::Blurred,
+                _ => Reason::BadlyExposed,
+            },
+            gain: gains[i],
+        };
+    }
+    for &i in &picked {
+        decisions[i] = chosen(gains[i]);
+    }
+    decisions
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn judged(score: f64, failure: Option<Failure>) -> Judgement {
+        Judgement {
+            relative_sharpness: score,
+            score,
+            failure,
+        }
+    }
+
+    fn cov(cells: std::ops::Range<u32>) -> FrameCoverage {
+        FrameCoverage {
+            quality: vec![1.0; cells.len()],
+            cells: cells.collect(),
+        }
+    }
+
+    #[test]
+    fn failed_frames_only_fill_wall_nobody_else_sees() {
+        // Frames 0-3 see cells 0..40 in overlapping strips; frame 4 (blurred) sees 0..10,
+        // covered by frame 0; frame 5 (badly exposed) alone sees 60..70.
+        let j = vec![
+            judged(1.0, None),
+            judged(1.0, None),
+            judged(1.0, None),
+            judged(0.9, None),
+            judged(0.3, Some(Failure::Blurred)),
+            judged(0.5, Some(Failure::BadlyExposed)),
+        ];
+        let c = vec![
+            cov(0..12),
+            cov(10..22),
+            cov(20..32),
+            cov(28..40),
+            cov(0..10),
+            cov(60..70),
+        ];
+        let opts = SelectionOptions {
+            views_per_cell: 1,
+            ..Default::default()
+        };
+        use Reason::*;
+        let with = |max_frames| SelectionOptions {
+            max_frames,
+            ..opts.clone()
+        };
+        // Budget 5: the four healthy frames, then frame 5 for its own wall, not frame 4.
+        let d = choose_frames(&j, &c, 80, &with(5));
+        let reasons: Vec<Reason> = d.iter().map(|d| d.reason).collect();
+        assert_eq!(
+            reasons,
+            vec![Chosen, Chosen, Chosen, Chosen, Blurred, Chosen]
+        );
+        assert!((d[5].gain - 5.0).abs() < 1e-9);
+        // Within the budget the whole video is used.
+        let d = choose_frames(&j, &c, 80, &with(6));
+        assert!(d.iter().all(|d| d.reason == Chosen));
+        // Budget 3: frames 0, 2, 1 (gains 12, 12, 8); frame 3 would add 8 x 0.9: over budget;
+        // frame 5 has no budget left.
+        let d = choose_frames(
+            &j,
+            &c,
+            80,
+            &SelectionOptions {
+                max_frames: 3,
+                ..opts
+            },
+        );
+        let reasons: Vec<Reason> = d.iter().map(|d| d.reason).collect();
+        assert_eq!(
+            reasons,
+            vec![Chosen, Chosen, Chosen, OverBudget, Blurred, BadlyExposed]
+        );
+        assert!((d[3].gain - 7.2).abs() < 1e-6);
+    }
+}

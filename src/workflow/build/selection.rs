@@ -1,0 +1,233 @@
+//! The frame selection stage (issue 21): right after the scene is prepared and before the
+//! registration, score every frame in one streaming pass, ray cast each from its pose on a
+//! coarse grid for the wall it sees, and keep the frames [`crate::selection`] chooses under
+//! `--max-frames`. Every later stage (registration included) sees the kept frames only.
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::options::BuildOptions;
+use super::scene::BuildScene;
+use crate::camera::Camera;
+use crate::image::Frame;
+use crate::io::case::FramesLocation;
+use crate::io::png::read_png;
+use crate::io::poses::FrameRef;
+use crate::model::selection::{FrameSelection, SelectedFrame};
+use crate::raycast::{cast_frame_with, RayTable};
+use crate::registration::pyramid::level_camera;
+use crate::selection::{
+    choose_frames, judge_frames, needs_coverage, score_frame, CoverState, CoverageGrid, Failure,
+    FrameCoverage, FrameStats, Reason, WallHit,
+};
+use crate::workflow::progress::Progress;
+use crate::{Error, Result};
+
+/// Choose the frames of `scene` (unless `opts.selection.max_frames` is 0) and drop the others
+/// from it. `None` when no selection ran.
+pub fn select_frames(
+    scene: &mut BuildScene,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+) -> Result<Option<FrameSelection>> {
+    let sel = &opts.selection;
+    if sel.max_frames == 0 {
+        return Ok(None);
+    }
+    let t = Instant::now();
+    let stats = score_all(scene, opts)?;
+    let judged = judge_frames(&stats, &sel.judge);
+    let t_score = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let atlas = &scene.atlas;
+    let grid = CoverageGrid::new(atlas.width, atlas.height, atlas.texel_mm, sel.cell_mm);
+    let (coverage, ray_grid) = if needs_coverage(&judged, sel.max_frames) {
+        let (c, g) = cast_coverage(scene, &grid, opts);
+        (c, Some(g))
+    } else {
+        (Vec::new(), None)
+    };
+    let t_cast = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let decisions = choose_frames(&judged, &coverage, grid.cells(), sel);
+    let keep: Vec<usize> = (0..decisions.len())
+        .filter(|&i| decisions[i].reason == Reason::Chosen)
+        .collect();
+    let seen = |frames: &mut dyn Iterator<Item = usize>| {
+        let mut st = CoverState::new(grid.cells(), 1);
+        frames.for_each(|i| st.add(&coverage[i], 1.0));
+        st.seen_cells()
+    };
+    let (cells_used, cells_all) = if coverage.is_empty() {
+        (0, 0)
+    } else {
+        (
+            seen(&mut keep.iter().copied()),
+            seen(&mut (0..coverage.len())),
+        )
+    };
+    if keep.is_empty() {
+        warnings.push(
+            "frame selection: no frame sees the airway wall usably; every frame is kept".into(),
+        );
+    } else if keep.len() < scene.frame_count() {
+        scene.keep_frames(&keep, opts.depth_cache_bytes);
+    }
+    let frames: Vec<SelectedFrame> = (0..decisions.len())
+        .map(|i| SelectedFrame {
+            frame: i,
+            used: keep.is_empty() || decisions[i].reason == Reason::Chosen,
+            reason: decisions[i].reason,
+            flagged: judged[i].failure.map(|f| {
+                match f {
+                    Failure::Blurred => Reason::Blurred,
+                    Failure::BadlyExposed => Reason::BadlyExposed,
+                }
+                .name()
+                .to_string()
+            }),
+            sharpness: stats[i].sharpness,
+            relative_sharpness: judged[i].relative_sharpness,
+            saturated_share: stats[i].saturated_share,
+            dark_share: stats[i].dark_share,
+            score: judged[i].score,
+            coverage_gain: decisions[i].gain,
+        })
+        .collect();
+    let counts = Reason::ALL
+        .iter()
+        .map(|r| {
+            (
+                r.name().to_string(),
+                frames.iter().filter(|f| f.reason == *r).count(),
+            )
+        })
+        .collect();
+    Ok(Some(FrameSelection {
+        budget: sel.max_frames,
+        used: frames.iter().filter(|f| f.used).count(),
+        counts,
+        coverage_grid: ray_grid,
+        cells_seen_used: cells_used,
+        cells_seen_all: cells_all,
+        seconds: [t_score, t_cast, t.elapsed().as_secs_f64()],
+        frames,
+    }))
+}
+
+/// Score every frame in one pass: PNG files decoded in parallel (one frame per thread in
+/// memory), a video decoded as one stream.
+fn score_all(scene: &BuildScene, opts: &BuildOptions) -> Result<Vec<FrameStats>> {
+    let case = &scene.case;
+    let mask = case.mask.as_ref().map(|m| m.image.as_slice());
+    let n = case.frame_count();
+    let progress = Progress::new("scoring frames", n as u64, opts.quiet);
+    let score = |f: &Frame| {
+        progress.inc();
+        score_frame(f, mask, &opts.selection.score)
+    };
+    let stats = match &case.frames {
+        FramesLocation::Png { .. } => case
+            .poses
+            .par_iter()
+            .map(|p| match &p.frame {
+                FrameRef::Image(path) => {
+                    let f = read_png(path)?;
+                    check_size(&f, &case.camera, path)?;
+                    Ok(score(&f))
+                }
+                FrameRef::VideoIndex(_) => Err(Error::invalid(
+                    &case.poses_path,
+                    "refers to video frames but the case has PNG frames",
+                )),
+            })
+            .collect::<Result<Vec<_>>>()?,
+        FramesLocation::Video { .. } => case
+            .frame_source()?
+            .map(|f| f.map(|f| score(&f)))
+            .collect::<Result<Vec<_>>>()?,
+    };
+    progress.finish();
+    Ok(stats)
+}
+
+fn check_size(f: &Frame, camera: &Camera, path: &std::path::Path) -> Result<()> {
+    if (f.width, f.height) != (camera.width, camera.height) {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "frame size {}x{} differs from the camera's {}x{}",
+                f.width, f.height, camera.width, camera.height
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The pyramid level whose camera has at most `max_rays` pixels.
+fn coverage_level(camera: &Camera, max_rays: usize) -> usize {
+    let mut level = 0;
+    while ((camera.width >> level) as usize) * ((camera.height >> level) as usize) > max_rays
+        && (camera.width >> (level + 1)) >= 8
+        && (camera.height >> (level + 1)) >= 8
+    {
+        level += 1;
+    }
+    level
+}
+
+/// Every frame's coverage, ray cast from its pose through the reduced camera (the case's
+/// image mask sampled at each reduced pixel's centre); returns the ray grid's size too.
+fn cast_coverage(
+    scene: &BuildScene,
+    grid: &CoverageGrid,
+    opts: &BuildOptions,
+) -> (Vec<FrameCoverage>, [u32; 2]) {
+    let camera = &scene.case.camera;
+    let level = coverage_level(camera, opts.selection.max_rays);
+    let small = level_camera(camera, level);
+    let rays = RayTable::new(&small);
+    let s = 1usize << level;
+    let mask: Option<Vec<bool>> = scene.case.mask.as_ref().map(|m| {
+        let (w, h) = (small.width as usize, small.height as usize);
+        (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) * s + s / 2, (i / w) * s + s / 2);
+                m.image[y.min(camera.height as usize - 1) * camera.width as usize
+                    + x.min(camera.width as usize - 1)]
+            })
+            .collect()
+    });
+    let n = scene.frame_count();
+    let progress = Progress::new("frame coverage", n as u64, opts.quiet);
+    let coverage = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let mut g = cast_frame_with(&scene.scene, &rays, &scene.poses[i]);
+            if let Some(m) = &mask {
+                g.mask_out(m);
+            }
+            let hits = (0..g.tri.len()).filter(|&k| g.hit(k)).map(|k| {
+                let uv = scene.tri_uv[g.tri[k] as usize];
+                let [u, v] = g.bary[k];
+                let w0 = 1.0 - u - v;
+                WallHit {
+                    uv: [
+                        w0 * uv[0][0] + u * uv[1][0] + v * uv[2][0],
+                        w0 * uv[0][1] + u * uv[1][1] + v * uv[2][1],
+                    ],
+                    z: g.z[k],
+                    gamma: g.gamma[k],
+                }
+            });
+            let c = FrameCoverage::from_hits(hits, grid, camera.fx, scene.atlas.texel_mm);
+            progress.inc();
+            c
+        })
+        .collect();
+    progress.finish();
+    (coverage, [small.width, small.height])
+}
