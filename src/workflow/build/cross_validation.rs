@@ -9,6 +9,7 @@
 //! whole video; the held-out frame's own gain is replaced by the gain fit of the comparison).
 
 use super::error::BuildError;
+use super::frames::Resolution;
 use super::options::BuildOptions;
 use super::scene::BuildScene;
 use crate::image::Frame;
@@ -61,6 +62,7 @@ pub fn cross_validate(
     for kind in shading.kinds() {
         let shaders = shading.frame_shaders(kind)?;
         let mut stream = scene.frames(
+            Resolution::Working,
             shaders,
             train.clone(),
             &format!("cross-validate {kind}"),

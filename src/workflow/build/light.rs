@@ -10,7 +10,7 @@ use std::borrow::Cow;
 
 use super::error::BuildError;
 use super::fit_pass::LightSamples;
-use super::frames::CaseFrames;
+use super::frames::{CaseFrames, Resolution};
 use super::gain_correction::correct_gains;
 use super::light_refit::refit_light_against_texture;
 use super::options::BuildOptions;
@@ -150,8 +150,14 @@ impl<'a> Consensus<'a> {
         passes: usize,
     ) -> CaseFrames<'b> {
         let n = self.scene.frame_count();
-        self.scene
-            .frames(model, (0..n).collect(), label, passes, self.quiet)
+        self.scene.frames(
+            Resolution::Working,
+            model,
+            (0..n).collect(),
+            label,
+            passes,
+            self.quiet,
+        )
     }
 
     /// The consensus texture of every frame de-lit with `model`, on [`Consensus::texels`].

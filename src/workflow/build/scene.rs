@@ -175,10 +175,11 @@ impl BuildScene {
         self.poses.len()
     }
 
-    /// Stream the frames `subset` (increasing indices) shaded by `shading`, with a progress bar
-    /// of `passes` passes labelled `label`.
+    /// Stream the frames `subset` (increasing indices) at `resolution` shaded by `shading`,
+    /// with a progress bar of `passes` passes labelled `label`.
     pub fn frames<'a>(
         &'a self,
+        resolution: Resolution,
         shading: &'a dyn FrameShaders,
         subset: Vec<usize>,
         label: &str,
@@ -186,20 +187,7 @@ impl BuildScene {
         quiet: bool,
     ) -> CaseFrames<'a> {
         let progress = Progress::new(label, (passes * subset.len()) as u64, quiet);
-        CaseFrames::new(self, shading, subset, Resolution::Working, progress)
-    }
-
-    /// The same at full resolution (the final fusion: the texture keeps every pixel's detail).
-    pub fn full_frames<'a>(
-        &'a self,
-        shading: &'a dyn FrameShaders,
-        subset: Vec<usize>,
-        label: &str,
-        passes: usize,
-        quiet: bool,
-    ) -> CaseFrames<'a> {
-        let progress = Progress::new(label, (passes * subset.len()) as u64, quiet);
-        CaseFrames::new(self, shading, subset, Resolution::Full, progress)
+        CaseFrames::new(self, shading, subset, resolution, progress)
     }
 
     /// Frame `i`'s file name (PNG) or index (video), for messages.

@@ -3,7 +3,7 @@
 //! each frame's Psi) beside it, so the paper's method stays the reference new views are
 //! compared against.
 
-use super::frames::DepthCache;
+use super::frames::{DepthCache, Resolution};
 use super::options::BuildOptions;
 use super::scene::BuildScene;
 use crate::shading::{FittedShading, ShadingKind};
@@ -76,7 +76,15 @@ fn fuse_albedo(
     let shaders = shading.frame_shaders(kind)?;
     let n = scene.frame_count();
     let passes = opts.fusion.method.passes();
-    let mut stream = scene.full_frames(shaders, (0..n).collect(), label, passes, opts.quiet);
+    // The texture keeps every pixel's detail.
+    let mut stream = scene.frames(
+        Resolution::Full,
+        shaders,
+        (0..n).collect(),
+        label,
+        passes,
+        opts.quiet,
+    );
     let fused = fuse(&scene.texels, &mut stream, &opts.fusion)?;
     stream.progress.finish();
     let mut rgb = fused.filled(&scene.texels)?;
