@@ -4,7 +4,6 @@
 
 use super::light::LightEval;
 use super::pose::rotation_of;
-use super::pyramid::level_camera;
 use crate::camera::pose::camera_centre;
 use crate::camera::Camera;
 use crate::math::{Affine, Vector3};
@@ -47,7 +46,7 @@ pub struct RayGrid {
 impl RayGrid {
     /// The grid of `camera` at `level` with `stride`.
     pub fn new(camera: &Camera, level: usize, stride: usize) -> RayGrid {
-        let cam = level_camera(camera, level);
+        let cam = camera.at_level(level);
         let stride = stride.max(1);
         let (gw, gh) = (
             (cam.width as usize).div_ceil(stride),

@@ -107,11 +107,6 @@ impl Default for PyramidOptions {
     }
 }
 
-/// The camera of pyramid level `level` ([`Camera::at_level`]).
-pub fn level_camera(camera: &Camera, level: usize) -> Camera {
-    camera.at_level(level)
-}
-
 /// The pyramid of one observed frame.
 #[derive(Clone, Debug)]
 pub struct ObservedPyramid {
@@ -180,7 +175,7 @@ impl ObservedPyramid {
                     }
                 }
             }
-            levels.push(make_level(rgb, valid, nw, nh, level_camera(camera, l)));
+            levels.push(make_level(rgb, valid, nw, nh, camera.at_level(l)));
         }
         Ok(ObservedPyramid { levels })
     }

@@ -203,9 +203,14 @@ impl BuildScene {
 /// 320-pixel demo is fitted and registered at full resolution; its pixel-bound stages are a
 /// small share of its build, so reducing it saves nothing measurable).
 fn max_level(camera: &Camera) -> usize {
-    (0..=3)
+    coarsest_level(camera, 256, 3)
+}
+
+/// The coarsest level up to `most` at which the camera's short side keeps `min_side` pixels.
+pub(super) fn coarsest_level(camera: &Camera, min_side: u32, most: usize) -> usize {
+    (0..=most)
         .rev()
-        .find(|&l| camera.width.min(camera.height) >> l >= 256)
+        .find(|&l| camera.width.min(camera.height) >> l >= min_side)
         .unwrap_or(0)
 }
 
@@ -219,11 +224,7 @@ fn working_level(case: &Case, scene: &Scene, texel_mm: f64) -> usize {
         return 0;
     }
     // A coarse probe (~64 pixels across) is enough for a median.
-    let probe_level = (0..=4)
-        .rev()
-        .find(|&l| case.camera.width.min(case.camera.height) >> l >= 64)
-        .unwrap_or(0);
-    let probe = case.camera.at_level(probe_level);
+    let probe = case.camera.at_level(coarsest_level(&case.camera, 64, 4));
     let rays = RayTable::new(&probe);
     let mut depths: Vec<f32> = [0, n / 2, n - 1]
         .iter()

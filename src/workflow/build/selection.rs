@@ -16,7 +16,6 @@ use crate::io::png::read_png;
 use crate::io::poses::FrameRef;
 use crate::model::selection::{FrameSelection, SelectedFrame};
 use crate::raycast::{cast_frame_with, RayTable};
-use crate::registration::pyramid::level_camera;
 use crate::selection::{
     choose_frames, judge_frames, needs_coverage, score_frame, CoverState, CoverageGrid, Failure,
     FrameCoverage, FrameStats, Reason, WallHit,
@@ -188,7 +187,7 @@ fn cast_coverage(
 ) -> (Vec<FrameCoverage>, [u32; 2]) {
     let camera = &scene.case.camera;
     let level = coverage_level(camera, opts.selection.max_rays);
-    let small = level_camera(camera, level);
+    let small = camera.at_level(level);
     let rays = RayTable::new(&small);
     let s = 1usize << level;
     let mask: Option<Vec<bool>> = scene.case.mask.as_ref().map(|m| {
