@@ -124,6 +124,16 @@ impl Pcg32 {
         lo + (hi - lo) * self.uniform()
     }
 
+    /// Two independent standard normal deviates (both of a Box–Muller pair).
+    #[inline]
+    pub fn normal_pair(&mut self) -> (f64, f64) {
+        let u1 = self.uniform().max(1e-300);
+        let u2 = self.uniform();
+        let r = (-2.0 * u1.ln()).sqrt();
+        let (s, c) = (std::f64::consts::TAU * u2).sin_cos();
+        (r * c, r * s)
+    }
+
     /// Standard normal deviate (Box–Muller; one of the pair is discarded for simplicity).
     #[inline]
     pub fn normal(&mut self) -> f64 {

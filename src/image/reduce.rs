@@ -52,6 +52,29 @@ pub fn reduce_mask(mask: &[bool], width: usize, height: usize, level: usize) -> 
         .collect()
 }
 
+/// `frame`, a reduction by `2^level`, brought back to `width × height` by bilinear
+/// interpolation between the reduced pixels' centres (a reduced pixel `u` is centred on
+/// full-resolution `2^level u + (2^level - 1) / 2`, as in [`reduce_frame`]); beyond the outer
+/// centres the edge values are extended.
+pub fn expand_frame(frame: &Frame, level: usize, width: u32, height: u32) -> Frame {
+    if level == 0 && frame.width == width && frame.height == height {
+        return frame.clone();
+    }
+    let s = (1u32 << level) as f64;
+    let off = (s - 1.0) / 2.0;
+    let mut out = Frame::new(width, height);
+    for y in 0..height {
+        let v = ((y as f64 - off) / s).clamp(0.0, frame.height as f64 - 1.0);
+        for x in 0..width {
+            let u = ((x as f64 - off) / s).clamp(0.0, frame.width as f64 - 1.0);
+            if let Some(px) = frame.bilinear(u, v) {
+                out.set(x, y, px);
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -75,6 +98,31 @@ mod tests {
         assert_eq!(b[1], 1.0);
         assert!((b[0] - 0.25).abs() < 1e-6 && (b[2] - 0.2).abs() < 1e-6);
         assert_eq!(reduce_frame(&f, 0, 0.999), f);
+    }
+
+    #[test]
+    fn expanding_a_reduced_ramp_gives_the_ramp_back() {
+        let (w, h) = (16u32, 8u32);
+        let mut f = Frame::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                f.set(x, y, [0.01 * x as f32, 0.02 * y as f32, 0.5]);
+            }
+        }
+        let e = expand_frame(&reduce_frame(&f, 1, 2.0), 1, w, h);
+        assert_eq!((e.width, e.height), (w, h));
+        // Between the outer reduced centres (0.5 .. w - 1.5) a linear ramp is exact; beyond
+        // them the edge value is held.
+        for y in 1..h - 1 {
+            for x in 1..w - 1 {
+                let (a, b) = (e.get(x, y), f.get(x, y));
+                assert!(
+                    (a[0] - b[0]).abs() < 1e-5 && (a[1] - b[1]).abs() < 1e-5,
+                    "{x},{y}"
+                );
+            }
+        }
+        assert!((e.get(0, 0)[0] - 0.005).abs() < 1e-6);
     }
 
     #[test]

@@ -10,6 +10,7 @@
 //! temporary folder beside `out` and renamed into place at the end.
 
 use super::albedo::MucosaAlbedo;
+use super::baked_albedo::{AlbedoSampling, SurfaceAlbedo};
 use super::ct_volume::{make_ct_phantom, CtPhantomOptions};
 use super::from_mask::{ct_from_mask_file, FromMaskOptions};
 use super::mask_path::mask_centreline;
@@ -75,9 +76,20 @@ pub struct PhantomOptions {
     pub pose_noise: PoseNoise,
     /// Motion blur of a share of the frames (none by default).
     pub motion_blur: MotionBlur,
+    /// How the albedo is evaluated; `None` = baked for long videos (more than
+    /// [`BAKE_ABOVE_PIXELS`] frame pixels), procedural otherwise.
+    pub albedo_sampling: Option<AlbedoSampling>,
     /// Replace an existing `out` folder.
     pub force: bool,
 }
+
+/// Frame pixels (frames x width x height) above which the albedo is baked by default: the
+/// bake costs about what 25 million procedural hits do (the demo's video is 8 million).
+pub const BAKE_ABOVE_PIXELS: u64 = 50_000_000;
+
+/// Lattice spacing (mm) of the baked albedo by default: a quarter of the finest vessels' width
+/// (0.3 mm), so the vessel profile keeps its shape.
+pub const BAKED_SPACING_MM: f64 = 0.075;
 
 impl Default for PhantomOptions {
     fn default() -> Self {
@@ -102,6 +114,7 @@ impl Default for PhantomOptions {
             scope_overlay: false,
             pose_noise: PoseNoise::new(0.0, 0.0),
             motion_blur: MotionBlur::default(),
+            albedo_sampling: None,
             force: false,
         }
     }
@@ -126,8 +139,26 @@ pub struct PhantomSummary {
     pub frame_saturated_fraction: Vec<f64>,
     /// Frames with motion blur (indices).
     pub blurred_frames: Vec<usize>,
+    /// How the albedo was evaluated.
+    pub albedo: Option<AlbedoSampling>,
     /// Seconds: CT, truth mesh, path, frames, truth views, writing the CT.
     pub seconds: [f64; 6],
+}
+
+impl PhantomOptions {
+    /// The albedo sampling asked for, or the default for the video's size.
+    pub fn resolved_albedo_sampling(&self) -> AlbedoSampling {
+        self.albedo_sampling.unwrap_or_else(|| {
+            let pixels = self.frames as u64 * self.width as u64 * self.height as u64;
+            if pixels > BAKE_ABOVE_PIXELS {
+                AlbedoSampling::Baked {
+                    spacing_mm: BAKED_SPACING_MM,
+                }
+            } else {
+                AlbedoSampling::Procedural
+            }
+        })
+    }
 }
 
 /// The bronchoscope camera of the phantom: fx = fy = width/2, barrel distortion.
@@ -204,7 +235,7 @@ struct Anatomy {
 struct Stage<'a> {
     opts: &'a PhantomOptions,
     scene: Scene,
-    albedo: MucosaAlbedo,
+    albedo: SurfaceAlbedo,
 }
 
 fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
@@ -226,10 +257,13 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     sm.seconds[2] = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
+    let scene = Scene::new(mesh)?;
+    let sampling = opts.resolved_albedo_sampling();
+    sm.albedo = Some(sampling);
     let stage = Stage {
         opts,
-        scene: Scene::new(mesh)?,
-        albedo: phantom_albedo(seed),
+        albedo: SurfaceAlbedo::new(phantom_albedo(seed), sampling, &scene),
+        scene,
     };
     let camera = phantom_camera(opts.width, opts.height);
     let gains = write_frames(dir, &stage, &camera, &poses, &mut sm)?;

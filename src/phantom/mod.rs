@@ -5,6 +5,7 @@
 pub mod albedo;
 pub mod analysis;
 pub mod anatomy;
+pub mod baked_albedo;
 pub mod branch;
 pub mod case;
 pub mod ct_volume;

@@ -10,6 +10,10 @@ use crate::registration::pose::{apply_delta, rotation_of, PoseDelta};
 use crate::rng::Pcg32;
 use serde::Serialize;
 
+/// Sub-renders of blurred frames are rendered at a reduced size no narrower than this
+/// (pixels); frames up to twice as wide are rendered at full size.
+pub const SUB_RENDER_MIN_WIDTH: u32 = 640;
+
 /// How many frames are blurred and how much.
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct MotionBlur {
@@ -37,6 +41,17 @@ impl MotionBlur {
     pub fn sub_renders(&self, width: u32) -> u32 {
         let px = self.length_share * width as f64;
         ((px / 3.0).ceil() as u32).clamp(3, self.max_sub_renders.max(3))
+    }
+
+    /// Pyramid level the sub-renders of a frame `width` pixels wide are rendered at: halved
+    /// while they stay at least [`SUB_RENDER_MIN_WIDTH`] wide, then expanded back (the smear
+    /// spans tens of pixels at those sizes; a blurred HD frame would cost 8 full renders).
+    pub fn sub_render_level(width: u32) -> usize {
+        let mut level = 0;
+        while width >> (level + 1) >= SUB_RENDER_MIN_WIDTH {
+            level += 1;
+        }
+        level
     }
 
     /// Which of `frames` frames are blurred: `round(share · frames)` of them, drawn with `seed`.
@@ -106,6 +121,10 @@ mod tests {
         // 320 px wide: a smear of 9.6 px in 4 sub-renders; 1280 px: 38.4 px, capped at 8.
         assert_eq!(mb.sub_renders(320), 4);
         assert_eq!(mb.sub_renders(1280), 8);
+        assert_eq!(MotionBlur::sub_render_level(320), 0);
+        assert_eq!(MotionBlur::sub_render_level(1279), 0);
+        assert_eq!(MotionBlur::sub_render_level(1280), 1);
+        assert_eq!(MotionBlur::sub_render_level(1920), 1);
         let poses: Vec<Affine> = (0..3)
             .map(|k| {
                 let mut m = Affine::identity();

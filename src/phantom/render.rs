@@ -10,7 +10,7 @@
 //! sensor: a per-frame auto-gain (mean linear luminance to a target, capped so only a small
 //! percentile of pixels clips), Poisson–Gaussian noise and clipping at 1.0 (saturation).
 
-use super::albedo::MucosaAlbedo;
+use super::baked_albedo::SurfaceAlbedo;
 use crate::camera::Camera;
 use crate::image::Frame;
 use crate::math::Affine;
@@ -188,7 +188,7 @@ pub fn render_radiance(
     scene: &Scene,
     rays: &SubpixelRays,
     camera_to_world: &Affine,
-    albedo: &MucosaAlbedo,
+    albedo: &SurfaceAlbedo,
     light: &LightModel,
 ) -> Radiance {
     let gb = cast_frame_with(scene, &rays.table, camera_to_world);
@@ -201,12 +201,7 @@ pub fn render_radiance(
             if !gb.hit(i) {
                 return ([0.0; 3], [0.0; 3], false);
             }
-            let p = gb.point[i];
-            let a = albedo.eval(crate::math::Point3::new(
-                p[0] as f64,
-                p[1] as f64,
-                p[2] as f64,
-            ));
+            let a = albedo.at(gb.tri[i], gb.bary[i], gb.point[i]);
             let cos_t = rays.table.dirs[i][2] as f64;
             let l = light
                 .direct_radiance(a, cos_t, gb.gamma[i] as f64, gb.z[i] as f64, k)
@@ -303,11 +298,19 @@ pub fn expose(
         .enumerate()
         .for_each(|(y, row)| {
             let mut rng = Pcg32::new(seed, (stream << 20) | y as u64);
+            // Shot and read noise are independent Gaussians: one deviate with their summed
+            // variance, two deviates per Box-Muller pair.
+            let mut spare = None;
+            let read_var = sensor.read_noise * sensor.read_noise;
             for v in row.iter_mut() {
                 let s = *v as f64 * gain;
                 let x = if noise {
-                    s + (s.max(0.0) / sensor.full_well_electrons).sqrt() * rng.normal()
-                        + sensor.read_noise * rng.normal()
+                    let n = spare.take().unwrap_or_else(|| {
+                        let (a, b) = rng.normal_pair();
+                        spare = Some(b);
+                        a
+                    });
+                    s + (s.max(0.0) / sensor.full_well_electrons + read_var).sqrt() * n
                 } else {
                     s
                 };

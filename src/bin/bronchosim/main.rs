@@ -10,6 +10,7 @@ use args::{
 };
 use bronchosim::inspect::{inspect, InspectOptions};
 use bronchosim::math::Point3;
+use bronchosim::phantom::baked_albedo::AlbedoSampling;
 use bronchosim::phantom::pose_noise::PoseNoise;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::render::evaluate::scores_text;
@@ -173,8 +174,17 @@ fn phantom(a: PhantomArgs) -> anyhow::Result<String> {
             a.motion_blur_share
         );
     }
+    let albedo_sampling = match a.baked_albedo_mm {
+        None => None,
+        Some(0.0) => Some(AlbedoSampling::Procedural),
+        Some(mm) if mm.is_finite() && mm >= 0.01 => Some(AlbedoSampling::Baked { spacing_mm: mm }),
+        Some(mm) => anyhow::bail!(
+            "--baked-albedo-mm {mm}: expected 0 (procedural) or a spacing of at least 0.01 mm"
+        ),
+    };
     let mut opts = PhantomOptions {
         frames: a.frames,
+        albedo_sampling,
         seed: a.seed,
         anatomy: a.anatomy,
         supersample: a.supersample,

@@ -17,10 +17,9 @@ use rayon::prelude::*;
 
 use crate::image::Frame;
 use crate::io::case::Case;
-use crate::math::Point3;
+use crate::phantom::baked_albedo::{AlbedoSampling, SurfaceAlbedo};
 use crate::phantom::case::phantom_albedo;
 use crate::phantom::render::LightModel;
-use crate::phantom::MucosaAlbedo;
 use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
 use crate::shading::frame_shading::LUMA;
 use crate::shading::CalibratedModel;
@@ -76,7 +75,7 @@ pub fn spread(v: &[f64]) -> (f64, f64) {
 struct PhantomTruth {
     gains: Vec<f64>,
     light: LightModel,
-    albedo: MucosaAlbedo,
+    albedo: SurfaceAlbedo,
 }
 
 fn read_json(path: &Path) -> Result<serde_json::Value> {
@@ -84,7 +83,7 @@ fn read_json(path: &Path) -> Result<serde_json::Value> {
     serde_json::from_str(&text).map_err(|e| Error::invalid(path, e.to_string()))
 }
 
-fn read_truth(truth_dir: &Path) -> Result<PhantomTruth> {
+fn read_truth(truth_dir: &Path, scene: &Scene) -> Result<PhantomTruth> {
     let gains_path = truth_dir.join("gains.json");
     let g = read_json(&gains_path)?;
     let gains = g["frames"]
@@ -98,13 +97,20 @@ fn read_truth(truth_dir: &Path) -> Result<PhantomTruth> {
     let light: LightModel = serde_json::from_value(g["light"].clone())
         .map_err(|e| Error::invalid(&gains_path, format!("light: {e}")))?;
     let truth_path = truth_dir.join("truth.json");
-    let seed = read_json(&truth_path)?["seed"]
+    let manifest = read_json(&truth_path)?;
+    let seed = manifest["seed"]
         .as_u64()
         .ok_or_else(|| Error::invalid(&truth_path, "no integer seed"))?;
+    // Cases made before the albedo could be baked evaluated it procedurally.
+    let sampling: AlbedoSampling = match manifest.get("albedo") {
+        None | Some(serde_json::Value::Null) => AlbedoSampling::Procedural,
+        Some(v) => serde_json::from_value(v.clone())
+            .map_err(|e| Error::invalid(&truth_path, format!("albedo: {e}")))?,
+    };
     Ok(PhantomTruth {
         gains,
         light,
-        albedo: phantom_albedo(seed),
+        albedo: SurfaceAlbedo::new(phantom_albedo(seed), sampling, scene),
     })
 }
 
@@ -127,7 +133,7 @@ pub fn shading_residuals(
     law: ShadingLaw,
     frame_step: usize,
 ) -> Result<ShadingResiduals> {
-    let truth = read_truth(truth_dir)?;
+    let truth = read_truth(truth_dir, scene)?;
     let n = case.frame_count();
     if truth.gains.len() != n {
         return Err(Error::invalid(
@@ -192,12 +198,7 @@ impl FrameEvaluator<'_> {
         let hits: Vec<usize> = (0..gb.z.len()).filter(|&i| gb.hit(i)).collect();
         let albedo: Vec<[f32; 3]> = hits
             .iter()
-            .map(|&i| {
-                let p = gb.point[i];
-                truth
-                    .albedo
-                    .eval(Point3::new(p[0] as f64, p[1] as f64, p[2] as f64))
-            })
+            .map(|&i| truth.albedo.at(gb.tri[i], gb.bary[i], gb.point[i]))
             .collect();
         let direct = self.phantom_direct(&gb, &hits, &albedo);
         let mean_direct =

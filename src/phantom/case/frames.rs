@@ -1,7 +1,8 @@
 //! The phantom's video: every frame rendered, exposed (auto gain, sensor noise, the scope's
 //! overlay if asked) and written, a few frames at a time in parallel (each render is parallel
 //! too; encoding and writing a PNG is not, and is most of an HD frame's time otherwise).
-//! Blurred frames ([`MotionBlur`]) average sub-renders along the exposure's motion.
+//! Blurred frames ([`MotionBlur`]) average sub-renders along the exposure's motion, rendered
+//! at half size from 1280 px wide up.
 
 use rayon::prelude::*;
 use serde::Serialize;
@@ -9,6 +10,7 @@ use std::path::Path;
 
 use super::{PhantomSummary, Stage};
 use crate::camera::{Camera, Pose};
+use crate::image::reduce::expand_frame;
 use crate::image::Frame;
 use crate::io::camera_file::write_camera_json;
 use crate::io::image_mask::MASK_FILE;
@@ -48,6 +50,9 @@ pub(super) fn write_frames(
 ) -> Result<Vec<FrameGain>> {
     let opts = stage.opts;
     let rays = SubpixelRays::new(camera, opts.supersample);
+    let blur_level = MotionBlur::sub_render_level(camera.width);
+    let blur_rays =
+        (blur_level > 0).then(|| SubpixelRays::new(&camera.at_level(blur_level), opts.supersample));
     let frames_dir = dir.join("frames");
     std::fs::create_dir_all(&frames_dir).map_err(|e| Error::io(&frames_dir, e))?;
     // What a tracker would report (the frames are rendered from the true poses).
@@ -68,6 +73,7 @@ pub(super) fn write_frames(
         stage,
         camera,
         rays: &rays,
+        blur_rays: blur_rays.as_ref().map(|r| (blur_level, r)),
         poses,
         blurred: &blurred,
         overlay: overlay.as_ref(),
@@ -116,6 +122,9 @@ struct FrameContext<'a> {
     stage: &'a Stage<'a>,
     camera: &'a Camera,
     rays: &'a SubpixelRays,
+    /// The reduced rays blurred frames' sub-renders use, and their level (see
+    /// [`MotionBlur::sub_render_level`]); `None` when they are rendered at full size.
+    blur_rays: Option<(usize, &'a SubpixelRays)>,
     poses: &'a [Affine],
     blurred: &'a [bool],
     overlay: Option<&'a ScopeOverlay>,
@@ -150,21 +159,27 @@ impl FrameContext<'_> {
     }
 
     fn radiance(&self, pose: &Affine) -> Frame {
-        let s = self.stage;
-        render_radiance(&s.scene, self.rays, pose, &s.albedo, &s.opts.light).frame
+        self.radiance_with(self.rays, pose)
     }
 
-    /// The mean radiance over the exposure's poses of frame `i`.
+    fn radiance_with(&self, rays: &SubpixelRays, pose: &Affine) -> Frame {
+        let s = self.stage;
+        render_radiance(&s.scene, rays, pose, &s.albedo, &s.opts.light).frame
+    }
+
+    /// The mean radiance over the exposure's poses of frame `i`, rendered at the sub-render
+    /// level and expanded to the frame's size.
     fn blurred_radiance(&self, i: usize, blur: &MotionBlur) -> Frame {
         let mut rng = Pcg32::new(self.blur_seed, i as u64);
         let sub = blur.exposure_poses(self.poses, i, self.camera.width, self.camera.fx, &mut rng);
-        let mut sum = Frame::new(self.camera.width, self.camera.height);
+        let (level, rays) = self.blur_rays.unwrap_or((0, self.rays));
+        let mut sum = Frame::new(rays.width, rays.height);
         for p in &sub {
-            let r = self.radiance(p);
+            let r = self.radiance_with(rays, p);
             sum.rgb.iter_mut().zip(&r.rgb).for_each(|(a, b)| *a += b);
         }
         let k = 1.0 / sub.len() as f32;
         sum.rgb.iter_mut().for_each(|v| *v *= k);
-        sum
+        expand_frame(&sum, level, self.camera.width, self.camera.height)
     }
 }

@@ -16,7 +16,7 @@ use crate::io::png::write_png_srgb8;
 use crate::io::poses::{write_poses, FrameRef, PoseEntry};
 use crate::math::{Affine, Point3};
 use crate::mesh::TriMesh;
-use crate::phantom::albedo::MucosaAlbedo;
+use crate::phantom::baked_albedo::SurfaceAlbedo;
 use crate::phantom::render::{expose, render_radiance, LightModel, SensorModel, SubpixelRays};
 use crate::phantom::truth_io::{
     write_albedo_ply, write_gray16_png, write_gray8_png, write_linear16_png,
@@ -52,10 +52,10 @@ pub(super) fn write_truth(
     let vertex_albedo: Vec<[f32; 3]> = mesh
         .positions
         .par_iter()
-        .map(|p| {
-            stage
-                .albedo
-                .eval(Point3::new(p.x as f64, p.y as f64, p.z as f64))
+        .enumerate()
+        .map(|(v, p)| {
+            let p = Point3::new(p.x as f64, p.y as f64, p.z as f64);
+            stage.albedo.at_vertex(v, p)
         })
         .collect();
     write_albedo_ply(&truth.join("albedo_vertices.ply"), mesh, &vertex_albedo)?;
@@ -110,6 +110,7 @@ pub(super) fn write_manifest(
         "size": [opts.width, opts.height],
         "supersample": opts.supersample,
         "truth_grid_mm": opts.truth_grid_mm,
+        "albedo": sm.albedo,
         "pose_noise": &opts.pose_noise,
         "motion_blur": {
             "share": opts.motion_blur.share,
@@ -119,6 +120,7 @@ pub(super) fn write_manifest(
         },
         "files": {
             "lumen.ply": "true lumen mesh, world mm (RAS+), normals into the lumen",
+            "albedo": "how the frames, the views and albedo_vertices.ply evaluate the mucosa albedo: procedural at every hit, or baked on lumen.ply (a barycentric lattice per triangle, spacing_mm apart at most, interpolated linearly)",
             "albedo_vertices.ply": "the same mesh with float red, green, blue: linear albedo per vertex",
             "gains.json": "per-frame auto-gain, light and sensor model",
             "motion_blur.frames": "frames averaged over sub-renders along the exposure's motion (a fast turn plus the path's travel, symmetric about the frame's pose in poses.json)",
@@ -145,7 +147,7 @@ fn write_view(
     scene: &Scene,
     pinhole: &Camera,
     rays: &SubpixelRays,
-    albedo: &MucosaAlbedo,
+    albedo: &SurfaceAlbedo,
     opts: &PhantomOptions,
     gain: f64,
 ) -> Result<()> {
@@ -172,8 +174,7 @@ fn write_view(
     let mut alb = Frame::new(w, h);
     for i in 0..gb.tri.len() {
         if gb.hit(i) {
-            let p = gb.point[i];
-            let a = albedo.eval(Point3::new(p[0] as f64, p[1] as f64, p[2] as f64));
+            let a = albedo.at(gb.tri[i], gb.bary[i], gb.point[i]);
             alb.rgb[3 * i..3 * i + 3].copy_from_slice(&a);
         }
     }
