@@ -176,6 +176,16 @@ impl Iterator for FrameSource {
         }
     }
 
+    /// The frame `n` places on, without decoding the ones passed over (a PNG is not read; a
+    /// video's frames are skipped by the decoder without conversion).
+    fn nth(&mut self, n: usize) -> Option<Result<Frame>> {
+        match self {
+            FrameSource::Images { paths, next, .. } => *next = (*next + n).min(paths.len()),
+            FrameSource::Video { indices, next, .. } => *next = (*next + n).min(indices.len()),
+        }
+        self.next()
+    }
+
     fn size_hint(&self) -> (usize, Option<usize>) {
         let left = match self {
             FrameSource::Images { paths, next, .. } => paths.len() - *next,
@@ -206,4 +216,31 @@ fn ended_early(reader: &VideoReader, wanted: usize, indices: &[usize]) -> Error 
             indices.last().copied().unwrap_or(wanted)
         ),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::png::write_png_srgb8;
+
+    #[test]
+    fn frames_passed_over_are_not_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut paths = Vec::new();
+        for k in 0..4 {
+            let p = dir.path().join(format!("{k}.png"));
+            let mut f = Frame::new(4, 3);
+            f.set(0, 0, [0.1 * k as f32, 0.0, 0.0]);
+            write_png_srgb8(&p, &f).unwrap();
+            paths.push(p);
+        }
+        // Frames 0 and 2 are not PNG files: reading them would fail.
+        std::fs::write(&paths[0], b"not a png").unwrap();
+        std::fs::write(&paths[2], b"not a png").unwrap();
+        let mut src = FrameSource::images(paths, 4, 3);
+        let red = |f: Frame| f.get(0, 0)[0];
+        assert!((red(src.nth(1).unwrap().unwrap()) - 0.1).abs() < 0.01);
+        assert!((red(src.nth(1).unwrap().unwrap()) - 0.3).abs() < 0.01);
+        assert!(src.nth(0).is_none());
+    }
 }

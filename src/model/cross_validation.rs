@@ -8,7 +8,7 @@ use crate::shading::ShadingKind;
 /// One held-out frame's prediction score.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct HeldOutScore {
-    /// Frame index.
+    /// Index of the frame in the case's poses.json.
     pub frame: usize,
     /// Pixels compared.
     pub pixels: usize,

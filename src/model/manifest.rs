@@ -19,7 +19,7 @@ pub const MODEL_FORMAT_VERSION: u32 = 2;
 /// Fit quality of one frame.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct FrameFit {
-    /// Frame index (poses order).
+    /// Index of the frame in the case's poses.json.
     pub frame: usize,
     /// Samples used in the fit.
     pub samples: usize,

@@ -89,7 +89,7 @@ pub struct TrackingSummary {
 /// before/after overlays; `workflow::registration_overlays`).
 #[derive(Clone, Debug)]
 pub struct PoseOverlay {
-    /// Index of the frame.
+    /// Index of the frame in the case's poses.json.
     pub frame: usize,
     /// Why it was chosen (e.g. "large correction").
     pub why: String,

@@ -93,19 +93,39 @@ fn estimate_noise(m: &[V6], rot: &[Matrix3<f64>], usable: &[bool], jitter: &[f64
 
 /// Smooth the measured corrections `measured` (relative to the given poses) of a video whose
 /// frames have camera → world rotations `rot`; frames not `usable` (not converged) take the
-/// drift alone. See the module docs.
+/// drift alone. `frame_numbers` are the frames' positions in the video (increasing; empty:
+/// consecutive): the drift walks one step per video frame, so after a frame selection two
+/// kept frames `k` apart are `k` steps apart. See the module docs.
 pub fn smooth_corrections(
     measured: &[PoseDelta],
     rot: &[Matrix3<f64>],
     usable: &[bool],
+    frame_numbers: &[usize],
     prior: &DriftPrior,
 ) -> Smoothed {
-    let n = measured.len();
     let m: Vec<V6> = measured.iter().map(to_v6).collect();
+    let noise = estimate_noise(&m, rot, usable, &jitter_of(prior));
+    smooth_with_noise(&m, rot, usable, frame_numbers, prior, noise)
+}
+
+/// The jitter per axis (mm, mm, mm, rad, rad, rad) of `prior`.
+fn jitter_of(prior: &DriftPrior) -> [f64; 6] {
     let jt = prior.jitter_mm / 3f64.sqrt();
     let jr = prior.jitter_deg.to_radians() / 3f64.sqrt();
-    let jitter = [jt, jt, jt, jr, jr, jr];
-    let noise = estimate_noise(&m, rot, usable, &jitter);
+    [jt, jt, jt, jr, jr, jr]
+}
+
+/// [`smooth_corrections`] with the registration noise per camera axis given (mm, radians).
+fn smooth_with_noise(
+    m: &[V6],
+    rot: &[Matrix3<f64>],
+    usable: &[bool],
+    frame_numbers: &[usize],
+    prior: &DriftPrior,
+    noise: [f64; 6],
+) -> Smoothed {
+    let n = m.len();
+    let jitter = jitter_of(prior);
     let sj = diag(jitter.map(|v| v * v));
     // Random-walk precision of the drift.
     let (dt, dr) = (
@@ -113,6 +133,17 @@ pub fn smooth_corrections(
         prior.drift_step_deg.to_radians() / 3f64.sqrt(),
     );
     let p = diag([dt, dt, dt, dr, dr, dr].map(|v| 1.0 / (v * v)));
+    // links[f]: the precision of the drift's change from frame f - 1 to f (a random walk of
+    // `steps` steps has `steps` times the variance of one); links[0] is unused.
+    let links: Vec<M6> = (0..n)
+        .map(|f| {
+            let steps = match (f, frame_numbers.len() == n) {
+                (0, _) | (_, false) => 1,
+                (_, true) => frame_numbers[f].saturating_sub(frame_numbers[f - 1]).max(1),
+            };
+            p / steps as f64
+        })
+        .collect();
     // Each frame's precision for the drift: (jitter + noise)^-1, the noise along its camera axes.
     let info: Vec<M6> = (0..n)
         .map(|f| {
@@ -124,27 +155,34 @@ pub fn smooth_corrections(
             cov.try_inverse().unwrap_or_else(M6::zeros)
         })
         .collect();
-    // Block-tridiagonal system: (J_f + P (links)) d_f - P d_{f-1} - P d_{f+1} = J_f m_f.
+    // Block-tridiagonal system:
+    // (J_f + P_f + P_{f+1}) d_f - P_f d_{f-1} - P_{f+1} d_{f+1} = J_f m_f.
     let mut diag_b: Vec<M6> = (0..n)
         .map(|f| {
-            let links = (f > 0) as usize + (f + 1 < n) as usize;
-            info[f] + p * links as f64
+            let mut b = info[f];
+            if f > 0 {
+                b += links[f];
+            }
+            if f + 1 < n {
+                b += links[f + 1];
+            }
+            b
         })
         .collect();
     let mut rhs: Vec<V6> = (0..n).map(|f| info[f] * m[f]).collect();
-    // Forward elimination (block Thomas); the off-diagonal blocks are all -P.
+    // Forward elimination (block Thomas); the off-diagonal blocks are -P_f.
     for f in 1..n {
         let Some(inv) = diag_b[f - 1].try_inverse() else {
             continue;
         };
-        let l = p * inv;
-        diag_b[f] -= l * p;
+        let l = links[f] * inv;
+        diag_b[f] -= l * links[f];
         rhs[f] = rhs[f] + l * rhs[f - 1];
     }
     let mut d = vec![V6::zeros(); n];
     for f in (0..n).rev() {
         let r = if f + 1 < n {
-            rhs[f] + p * d[f + 1]
+            rhs[f] + links[f + 1] * d[f + 1]
         } else {
             rhs[f]
         };
@@ -207,6 +245,7 @@ mod tests {
             &measured,
             &vec![r; n],
             &vec![true; n],
+            &[],
             &DriftPrior::default(),
         );
         // The roll noise is found (about 2 degrees), the other axes are clean.
@@ -233,5 +272,52 @@ mod tests {
             "{}",
             rms(&s.corrections, &tx)
         );
+    }
+
+    #[test]
+    fn kept_frames_far_apart_are_linked_by_as_many_drift_steps() {
+        // Frames 0, 3, 4, 9, 15, 16 of a 17-frame video kept: smoothing them with their frame
+        // numbers must equal smoothing the whole video with only those frames measured (the
+        // others carry no information, so k steps through them are one link of k steps).
+        let kept = [0usize, 3, 4, 9, 15, 16];
+        let mut rng = Pcg32::new(11, 3);
+        let mut draw = || {
+            let mut v = || Vector3::new(rng.normal(), rng.normal(), rng.normal());
+            PoseDelta {
+                translation_mm: v() * 0.4,
+                rotation: v() * 0.4f64.to_radians(),
+            }
+        };
+        let measured: Vec<PoseDelta> = kept.iter().map(|_| draw()).collect();
+        let r = Matrix3::identity();
+        let prior = DriftPrior::default();
+        // Registration noise on every axis, so that the drift matters (without it each frame
+        // keeps its own measurement).
+        let noise = [0.3, 0.3, 0.3, 0.01, 0.01, 0.01];
+        let m: Vec<V6> = measured.iter().map(to_v6).collect();
+        let sub = smooth_with_noise(&m, &vec![r; 6], &[true; 6], &kept, &prior, noise);
+        let mut full_m = vec![V6::zeros(); 17];
+        let mut usable = vec![false; 17];
+        for (k, &f) in kept.iter().enumerate() {
+            full_m[f] = m[k];
+            usable[f] = true;
+        }
+        let full = smooth_with_noise(&full_m, &vec![r; 17], &usable, &[], &prior, noise);
+        let far = |a: &PoseDelta, b: &PoseDelta| {
+            (a.translation_mm - b.translation_mm).norm() + (a.rotation - b.rotation).norm()
+        };
+        for (k, &f) in kept.iter().enumerate() {
+            let d = far(&sub.corrections[k], &full.corrections[f]);
+            assert!(d < 1e-9, "frame {f}: {d}");
+        }
+        // The smoother moved the measurements, and taken as consecutive frames they are
+        // smoothed harder.
+        let off: f64 = (0..6).map(|k| far(&sub.corrections[k], &measured[k])).sum();
+        assert!(off > 1e-3, "{off}");
+        let consecutive = smooth_with_noise(&m, &vec![r; 6], &[true; 6], &[], &prior, noise);
+        let moved: f64 = (0..6)
+            .map(|k| far(&consecutive.corrections[k], &sub.corrections[k]))
+            .sum();
+        assert!(moved > 1e-3, "{moved}");
     }
 }

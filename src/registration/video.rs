@@ -34,6 +34,9 @@ pub struct VideoOptions {
     /// Smooth the corrections with this model of the tracker's error (`None`: every frame
     /// keeps its own measurement; see [`super::prior`]).
     pub smooth: Option<DriftPrior>,
+    /// The frames' positions in the video (increasing; empty: consecutive), for the prior:
+    /// after a frame selection, kept frames far apart are allowed more drift between them.
+    pub frame_numbers: Vec<usize>,
 }
 
 impl Default for VideoOptions {
@@ -44,6 +47,7 @@ impl Default for VideoOptions {
             outlier_mm: 3.0,
             outlier_deg: 5.0,
             smooth: Some(DriftPrior::default()),
+            frame_numbers: Vec::new(),
         }
     }
 }
@@ -259,7 +263,7 @@ pub fn refine_video(
             .map(|f| ok[f] && res[f].status != FrameStatus::Outlier)
             .collect();
         let rot: Vec<_> = res.iter().map(|r| rotation_of(&r.pose)).collect();
-        let s = smooth_corrections(&deltas, &rot, &usable, prior);
+        let s = smooth_corrections(&deltas, &rot, &usable, &opts.frame_numbers, prior);
         noise = s.noise;
         for (f, d) in s.corrections.iter().enumerate() {
             res[f].pose = apply_delta(&poses[f], d);

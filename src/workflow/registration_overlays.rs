@@ -76,7 +76,7 @@ pub fn pose_overlays(
         let (cb_reg, mismatch_reg) = checkerboard(&frame, &at_registered);
         let r = &frame_results[f];
         out.push(PoseOverlay {
-            frame: f,
+            frame: r.frame,
             why: why.to_string(),
             correction_mm: r.correction_mm,
             correction_deg: r.correction_deg,

@@ -91,7 +91,8 @@ pub fn cross_validate(
         let mut scores = Vec::new();
         for (i, frame, mask) in &frames {
             let (pred, hit) = render_view_with(&inputs, &view_rays, &scene.poses[*i], &render)?;
-            scores.push(score_frame(kind, *i, pred, hit, frame, mask)?);
+            let number = scene.frame_numbers[*i];
+            scores.push(score_frame(kind, number, pred, hit, frame, mask)?);
         }
         let mean = |f: &dyn Fn(&HeldOutScore) -> Option<f64>| {
             let v: Vec<f64> = scores.iter().filter_map(f).collect();

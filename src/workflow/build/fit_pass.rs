@@ -84,7 +84,7 @@ pub fn fit_pass(scene: &mut BuildScene, opts: &BuildOptions) -> Result<(FitPass,
                     source: Box::new(e),
                 },
             })?;
-        fit.frame = i;
+        fit.frame = scene.frame_numbers[i];
         for (ch, sum) in pass.pixel_sum.iter_mut().enumerate() {
             *sum += samples.rgb[ch].iter().map(|&v| v as f64).sum::<f64>();
         }

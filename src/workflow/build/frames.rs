@@ -123,19 +123,18 @@ impl FrameStream for CaseFrames<'_> {
             self.next = 0;
         }
         let src = self.source.as_mut().expect("opened above");
-        while self.next <= index {
-            let f = src.next().ok_or(BuildError::FrameMissing {
+        // The frames between are passed over, not decoded.
+        let f = src
+            .nth(index - self.next)
+            .ok_or(BuildError::FrameMissing {
                 frame: index,
                 frames: self.next,
             })??;
-            if self.next == index {
-                self.frame = match self.resolution {
-                    Resolution::Working => self.scene.working_frame(f),
-                    Resolution::Full => f,
-                };
-            }
-            self.next += 1;
-        }
+        self.frame = match self.resolution {
+            Resolution::Working => self.scene.working_frame(f),
+            Resolution::Full => f,
+        };
+        self.next = index + 1;
         let pose = &self.scene.poses[index];
         let working = self.resolution == Resolution::Working || self.scene.level == 0;
         let level = if working { self.scene.level } else { 0 };

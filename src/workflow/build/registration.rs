@@ -25,7 +25,7 @@ use crate::math::Affine;
 use crate::model::registration::{FramePoseResult, PoseOverlay, PoseRegistration, RoundSummary};
 use crate::registration::{
     delta_between, register_round, FrameRegistration, FrameStatus, ModelParts, RoundKind,
-    RoundOptions, TrackState,
+    RoundOptions, TrackState, VideoOptions,
 };
 use crate::render::{MipOptions, MipTexture};
 use crate::shading::calibrated::CalibratedModel;
@@ -108,7 +108,7 @@ pub fn register_poses(
         .map(|(i, (status, is_flagged))| {
             let d = delta_between(&given[i], &scene.poses[i]);
             FramePoseResult {
-                frame: i,
+                frame: scene.frame_numbers[i],
                 correction_mm: d.mm(),
                 correction_deg: d.deg(),
                 status,
@@ -268,7 +268,13 @@ fn run_round(
         mask,
         &scene.poses,
         kind,
-        &RoundOptions::default(),
+        &RoundOptions {
+            video: VideoOptions {
+                frame_numbers: scene.frame_numbers.clone(),
+                ..VideoOptions::default()
+            },
+            ..RoundOptions::default()
+        },
     )?;
     let steps: Vec<(f64, f64)> = video
         .frames

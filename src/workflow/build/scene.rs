@@ -58,6 +58,9 @@ pub struct BuildScene {
     pub cache: DepthCache,
     /// Linear intensity at which a channel is saturated (kept saturated by the reduction).
     pub saturation_level: f32,
+    /// Each frame's position in the case's video (poses.json order): `0..n` until frames are
+    /// left out by the selection or the registration.
+    pub frame_numbers: Vec<usize>,
 }
 
 impl BuildScene {
@@ -127,6 +130,7 @@ impl BuildScene {
             full_rays,
             cache: DepthCache::new(n, opts.depth_cache_bytes, level),
             saturation_level: opts.samples.saturation_level,
+            frame_numbers: (0..n).collect(),
             case,
         })
     }
@@ -167,6 +171,7 @@ impl BuildScene {
     pub fn keep_frames(&mut self, keep: &[usize], cache_bytes: usize) {
         self.case.poses = keep.iter().map(|&i| self.case.poses[i].clone()).collect();
         self.poses = keep.iter().map(|&i| self.poses[i]).collect();
+        self.frame_numbers = keep.iter().map(|&i| self.frame_numbers[i]).collect();
         self.cache = DepthCache::new(self.poses.len(), cache_bytes, self.level);
     }
 
