@@ -241,6 +241,6 @@ mod tests {
         let red = |f: Frame| f.get(0, 0)[0];
         assert!((red(src.nth(1).unwrap().unwrap()) - 0.1).abs() < 0.01);
         assert!((red(src.nth(1).unwrap().unwrap()) - 0.3).abs() < 0.01);
-        assert!(src.nth(0).is_none());
+        assert!(src.next().is_none());
     }
 }
