@@ -81,6 +81,8 @@ pub struct PhantomOptions {
     pub albedo_sampling: Option<AlbedoSampling>,
     /// Replace an existing `out` folder.
     pub force: bool,
+    /// No progress bar.
+    pub quiet: bool,
 }
 
 /// Frame pixels (frames x width x height) above which the albedo is baked by default: the
@@ -116,6 +118,7 @@ impl Default for PhantomOptions {
             motion_blur: MotionBlur::default(),
             albedo_sampling: None,
             force: false,
+            quiet: true,
         }
     }
 }

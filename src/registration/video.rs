@@ -37,6 +37,8 @@ pub struct VideoOptions {
     /// The frames' positions in the video (increasing; empty: consecutive), for the prior:
     /// after a frame selection, kept frames far apart are allowed more drift between them.
     pub frame_numbers: Vec<usize>,
+    /// Ticked once per frame refined (restarts lengthen it).
+    pub progress: Option<indicatif::ProgressBar>,
 }
 
 impl Default for VideoOptions {
@@ -48,6 +50,7 @@ impl Default for VideoOptions {
             outlier_deg: 5.0,
             smooth: Some(DriftPrior::default()),
             frame_numbers: Vec::new(),
+            progress: None,
         }
     }
 }
@@ -191,6 +194,9 @@ pub fn refine_video(
         let mut r = reg.refine_frame(&obs, start)?;
         // Corrections are always relative to the given pose.
         r.correction = delta_between(&poses[f], &r.pose);
+        if let Some(p) = &opts.progress {
+            p.inc(1);
+        }
         Ok(r)
     };
     let mut res: Vec<FrameRegistration> = (0..n)
@@ -237,6 +243,9 @@ pub fn refine_video(
             break;
         }
         passes += 1;
+        if let Some(p) = &opts.progress {
+            p.inc_length(jobs.len() as u64);
+        }
         let out: Vec<(usize, FrameRegistration)> = jobs
             .par_iter()
             .map(|(f, s)| run(*f, s).map(|r| (*f, r)))

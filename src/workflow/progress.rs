@@ -23,6 +23,11 @@ impl Progress {
         Progress { bar: Some(bar) }
     }
 
+    /// The bar itself, for a library stage that ticks it (`None` when quiet).
+    pub fn bar(&self) -> Option<ProgressBar> {
+        self.bar.clone()
+    }
+
     /// One unit done.
     pub fn inc(&self) {
         if let Some(b) = &self.bar {

@@ -38,7 +38,7 @@ fn run(command: Command, quiet: bool) -> anyhow::Result<String> {
         Command::Segment(a) => segment(a),
         Command::Inspect(a) => inspect_ct_or_case(a, quiet),
         Command::Convert(a) => convert(a, quiet),
-        Command::Phantom(a) => phantom(a),
+        Command::Phantom(a) => phantom(a, quiet),
         Command::Render(a) => render(a),
         Command::Flythrough(a) => fly(a, quiet),
         Command::Evaluate(a) => evaluate(a),
@@ -49,6 +49,7 @@ fn run(command: Command, quiet: bool) -> anyhow::Result<String> {
 fn demo(a: DemoArgs, quiet: bool) -> anyhow::Result<String> {
     let phantom = PhantomOptions {
         frames: a.frames,
+        quiet,
         ..Default::default()
     };
     let build = BuildOptions {
@@ -160,7 +161,7 @@ fn convert(a: ConvertArgs, quiet: bool) -> anyhow::Result<String> {
     Ok(s.to_text())
 }
 
-fn phantom(a: PhantomArgs) -> anyhow::Result<String> {
+fn phantom(a: PhantomArgs, quiet: bool) -> anyhow::Result<String> {
     if !(a.pose_noise_mm >= 0.0 && a.pose_noise_deg >= 0.0) {
         anyhow::bail!(
             "--pose-noise-mm {} / --pose-noise-deg {}: expected non-negative numbers",
@@ -191,6 +192,7 @@ fn phantom(a: PhantomArgs) -> anyhow::Result<String> {
         scope_overlay: a.scope_overlay,
         pose_noise: PoseNoise::new(a.pose_noise_mm, a.pose_noise_deg),
         force: a.force,
+        quiet,
         ..Default::default()
     };
     (opts.width, opts.height) = a.size.unwrap_or((opts.width, opts.height));

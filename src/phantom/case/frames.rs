@@ -22,6 +22,7 @@ use crate::phantom::overlay::ScopeOverlay;
 use crate::phantom::pose_noise::tracker_poses;
 use crate::phantom::render::{auto_gain, expose, render_radiance, SubpixelRays};
 use crate::rng::Pcg32;
+use crate::workflow::progress::Progress;
 use crate::{Error, Result};
 
 /// Frames rendered at once: enough to keep both the renders and the PNG encoders busy, few
@@ -81,6 +82,7 @@ pub(super) fn write_frames(
         blur_seed,
     };
     let mut gains = Vec::with_capacity(poses.len());
+    let progress = Progress::new("render frames", poses.len() as u64, opts.quiet);
     for chunk in (0..poses.len())
         .collect::<Vec<_>>()
         .chunks(FRAMES_IN_FLIGHT)
@@ -89,8 +91,10 @@ pub(super) fn write_frames(
             .par_iter()
             .map(|&i| ctx.write_frame(i))
             .collect::<Result<_>>()?;
+        done.iter().for_each(|_| progress.inc());
         gains.extend(done);
     }
+    progress.finish();
     for (i, g) in gains.iter().enumerate() {
         if g.blurred {
             sm.blurred_frames.push(i);

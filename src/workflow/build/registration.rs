@@ -30,6 +30,7 @@ use crate::registration::{
 use crate::render::{MipOptions, MipTexture};
 use crate::shading::calibrated::CalibratedModel;
 use crate::shading::{FittedShading, ShadingKind};
+use crate::workflow::progress::Progress;
 use crate::workflow::registration_overlays::{choose_overlay_frames, pose_overlays};
 use crate::Result;
 use std::time::Instant;
@@ -55,7 +56,7 @@ pub fn register_poses(
     if opts.poses == PosesMode::Fixed || (!first && opts.registration_rounds == 0) {
         return Ok(None);
     }
-    let view = RegistrationView::new(scene)?;
+    let view = RegistrationView::new(scene, opts.quiet)?;
     // Without a tracker the rounds start from the poses tracked from the first frame's.
     let (mut statuses, tracking, mut last_light) = if first {
         let (state, summary, light) = track_poses(scene, &view, opts, warnings)?;
@@ -176,7 +177,7 @@ pub(super) struct RegistrationView {
 }
 
 impl RegistrationView {
-    fn new(scene: &BuildScene) -> Result<RegistrationView> {
+    fn new(scene: &BuildScene, quiet: bool) -> Result<RegistrationView> {
         let full = &scene.case.camera;
         let level = (scene.level..=4)
             .find(|&l| full.width >> l <= 400 || full.width.min(full.height) >> (l + 1) < 64)
@@ -186,11 +187,16 @@ impl RegistrationView {
             .mask
             .as_ref()
             .map(|m| reduce_mask(&m.image, full.width as usize, full.height as usize, level));
+        let progress = Progress::new("read frames", scene.frame_count() as u64, quiet);
         let frames = scene
             .case
             .frame_source()?
-            .map(|f| f.map(|f| reduce_frame(&f, level, scene.saturation_level)))
+            .map(|f| {
+                progress.inc();
+                f.map(|f| reduce_frame(&f, level, scene.saturation_level))
+            })
             .collect::<std::result::Result<_, _>>()?;
+        progress.finish();
         Ok(RegistrationView {
             frames,
             camera: full.at_level(level),
@@ -261,6 +267,11 @@ fn run_round(
         camera: &view.camera,
     };
     let mask = view.mask.as_deref();
+    let label = match kind {
+        RoundKind::Geometry => "register (CT)",
+        RoundKind::Texture => "register",
+    };
+    let progress = Progress::new(label, scene.frame_count() as u64, opts.quiet);
     let video = register_round(
         parts,
         &view.frames,
@@ -271,11 +282,13 @@ fn run_round(
         &RoundOptions {
             video: VideoOptions {
                 frame_numbers: scene.frame_numbers.clone(),
+                progress: progress.bar(),
                 ..VideoOptions::default()
             },
             ..RoundOptions::default()
         },
     )?;
+    progress.finish();
     let steps: Vec<(f64, f64)> = video
         .frames
         .iter()
