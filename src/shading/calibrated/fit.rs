@@ -28,6 +28,7 @@ use super::samples::PooledSamples;
 use super::solver::{bounds, clamp_to, min_positive, rho_scale, solve};
 use crate::shading::bernstein::bernstein_eval;
 use crate::shading::error::check_weights;
+use crate::shading::indirect::GatheredInterreflection;
 use crate::shading::robust::Robust;
 use crate::shading::ShadingError;
 use crate::Result;
@@ -55,6 +56,11 @@ pub struct CalibratedOptions {
     /// 0.2-0.4 dB; with a uniform albedo it recovers the cone profile to 0.15% RMS (4.8%
     /// without). See BENCHMARKS.md "Inter-reflection".
     pub interreflection: bool,
+    /// With `interreflection`: fit it as `g_f alb k_c E_c` per sample, E the light gathered
+    /// from the mesh at the sample's surface point ([`PooledSamples::indirect`], which must be
+    /// set), instead of `kappa_c L_f`; excludes `ambient`. Default false (the build chooses
+    /// with `--interreflection`).
+    pub gathered: bool,
     /// Frame whose gain is fixed to 1. Default 0.
     pub reference_frame: usize,
     /// Most alternation rounds (each: rho, s, gains). Default 40.
@@ -89,6 +95,7 @@ impl Default for CalibratedOptions {
             s_degree: 3,
             ambient: false,
             interreflection: true,
+            gathered: false,
             reference_frame: 0,
             max_alternations: 40,
             tolerance: 1e-10,
@@ -168,6 +175,21 @@ fn check_inputs(samples: &PooledSamples, density: &[f32], opts: &CalibratedOptio
         + opts.s_degree
         + f * if opts.ambient { 4 } else { 1 }
         + if opts.interreflection { 3 } else { 0 };
+    if opts.gathered {
+        let ok = samples
+            .indirect
+            .as_ref()
+            .is_some_and(|e| e.iter().all(|v| v.len() == samples.len()));
+        if !ok || !opts.interreflection || opts.ambient {
+            return Err(ShadingError::BadOptions {
+                fit: FIT,
+                message: "the gathered inter-reflection needs every sample's gathered light, \
+                          the inter-reflection on and no per-frame ambient term"
+                    .into(),
+            }
+            .into());
+        }
+    }
     if opts.interreflection && samples.frame_light.len() != f {
         return Err(ShadingError::LengthMismatch {
             fit: FIT,
@@ -223,6 +245,7 @@ fn fit_inner(
         frames: samples.frames(),
         ambient: opts.ambient,
         interreflection: opts.interreflection,
+        gathered: opts.gathered,
     };
     let cos_edge = match init {
         Some(m) => m.cos_theta_edge,
@@ -284,6 +307,11 @@ fn fit_inner(
         rms,
         samples.len(),
     );
+    let mut model = model;
+    if let (Some(g), Some(Some(i))) = (model.gathered.as_mut(), init.map(|m| m.gathered)) {
+        // The gather's settings stay those of the light the samples were gathered with.
+        (g.nodes_across, g.rays, g.visibility) = (i.nodes_across, i.rays, i.visibility);
+    }
     Ok(CalibratedFit {
         model,
         report: rep,
@@ -322,6 +350,9 @@ fn params_of(lay: &Layout, m: &CalibratedModel) -> Result<Vec<f64>> {
     }
     p[lay.e_off()..lay.e_off() + lay.ns - 1].copy_from_slice(&m.s[1..]);
     p[lay.g_off()..lay.g_off() + lay.frames].copy_from_slice(&m.gains);
+    if let (true, Some(g)) = (lay.gathered, &m.gathered) {
+        p[lay.k_off()..lay.k_off() + 3].copy_from_slice(&g.k);
+    }
     if lay.ambient {
         for (f, a) in m.ambient.as_ref().into_iter().flatten().enumerate() {
             p[lay.a_off() + 3 * f..lay.a_off() + 3 * f + 3].copy_from_slice(a);
@@ -347,7 +378,7 @@ fn model_of(
         cos_theta_edge: cos_edge,
         gains: p[lay.g_off()..lay.g_off() + lay.frames].to_vec(),
         reference_frame: reference,
-        ambient: (lay.ambient || lay.interreflection).then(|| {
+        ambient: (lay.ambient || (lay.interreflection && !lay.gathered)).then(|| {
             (0..lay.frames)
                 .map(|f| {
                     let light = frame_light.get(f).copied().unwrap_or(0.0);
@@ -355,10 +386,17 @@ fn model_of(
                 })
                 .collect()
         }),
-        interreflection: lay
-            .interreflection
+        interreflection: (lay.interreflection && !lay.gathered)
             .then(|| std::array::from_fn(|c| p[lay.k_off() + c])),
-        frame_light: lay.interreflection.then(|| frame_light.to_vec()),
+        frame_light: (lay.interreflection && !lay.gathered).then(|| frame_light.to_vec()),
+        // The caller records how the light was gathered.
+        gathered: lay.gathered.then(|| GatheredInterreflection {
+            k: std::array::from_fn(|c| p[lay.k_off() + c]),
+            nodes_across: 1,
+            rays: 1,
+            visibility: false,
+        }),
+        frame_indirect: None,
         auto_exposure: None,
         rms_residual: rms,
         samples_used: n,
@@ -383,7 +421,10 @@ fn predict(
     std::array::from_fn(|c| {
         let alb = albedo.map_or(1.0, |a| f64::from(a[c][i]));
         let light = samples.frame_light.get(f).copied().unwrap_or(0.0);
-        let amb = super::moments::ambient_of(lay, p, light, f, c);
+        let mut amb = super::moments::ambient_of(lay, p, light, f, c);
+        if let (true, Some(e)) = (lay.gathered, &samples.indirect) {
+            amb *= alb * f64::from(e[c][i]);
+        }
         k * alb * bernstein_eval(&p[lay.c_off(c)..lay.c_off(c) + lay.nr], gam) + amb
     })
 }

@@ -30,6 +30,10 @@ pub(crate) struct Layout {
     /// Whether the inter-reflection term `kappa_c L_f` is in the model (kappa_c: 3
     /// parameters; L_f: the frame's mean observed luminance, [`FrameMoments::light`]).
     pub interreflection: bool,
+    /// Whether the inter-reflection is gathered per sample instead: its feature is
+    /// `alb_c E_c` (E: [`PooledSamples::indirect`]) with coefficient `g_f k_c` (k_c in the
+    /// kappa slots; no per-frame ambient then).
+    pub gathered: bool,
 }
 
 impl Layout {
@@ -123,7 +127,12 @@ pub(crate) fn accumulate(
 ) -> Vec<FrameMoments> {
     let d = lay.d();
     let d1 = d + 1;
-    let nmat = if albedo.is_some() { 3 } else { 1 };
+    let nmat = if albedo.is_some() || lay.gathered {
+        3
+    } else {
+        1
+    };
+    let indirect = samples.indirect.as_ref().filter(|_| lay.gathered);
     (0..samples.frames())
         .into_par_iter()
         .map(|f| {
@@ -154,16 +163,19 @@ pub(crate) fn accumulate(
                     // Albedo scales the shading features only (the ambient light is not reflected
                     // off this texel alone).
                     let alb = albedo.map_or(1.0, |a| f64::from(a[c][i]));
+                    // The last feature: 1 (a frame's ambient light), or the gathered light
+                    // reflected by this texel.
+                    let q = indirect.map_or(1.0, |e| alb * f64::from(e[c][i]));
                     let hc = &mut h[c];
                     for k in 0..d {
                         hc[k] += wi * p * alb * psi[k];
                     }
-                    hc[d] += wi * p;
+                    hc[d] += wi * p * q;
                     if c < nmat {
                         for k in 0..d {
                             psic[k] = alb * psi[k];
                         }
-                        psic[d] = 1.0;
+                        psic[d] = q;
                         let gm = &mut g[c];
                         for j in 0..d1 {
                             let a = wi * psic[j];
@@ -195,9 +207,13 @@ pub(crate) fn accumulate(
         .collect()
 }
 
-/// The light of frame f, channel c that does not depend on the surface's orientation or
-/// distance: `a_fc` and/or `kappa_c L_f` (`light` = L_f).
+/// The coefficient of the last feature of frame f, channel c: the light that does not depend
+/// on the surface's orientation or distance, `a_fc` and/or `kappa_c L_f` (`light` = L_f); or,
+/// gathered, `g_f k_c`.
 pub(crate) fn ambient_of(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize) -> f64 {
+    if lay.gathered {
+        return p[lay.g_off() + f] * p[lay.k_off() + c];
+    }
     let mut a = 0.0;
     if lay.ambient {
         a += p[lay.a_off() + 3 * f + c];
@@ -280,11 +296,16 @@ pub(crate) fn normal_equations(
                     jac[(row, lay.nr + lay.ns - 1)] = rho[j] * e;
                 }
             }
-            if lay.ambient {
-                jac[(d, lay.nr + lay.ns)] = 1.0;
-            }
-            if lay.interreflection {
-                jac[(d, idx.len() - 1)] = fm.light;
+            if lay.gathered {
+                jac[(d, lay.nr + lay.ns - 1)] = p[lay.k_off() + c];
+                jac[(d, idx.len() - 1)] = gf;
+            } else {
+                if lay.ambient {
+                    jac[(d, lay.nr + lay.ns)] = 1.0;
+                }
+                if lay.interreflection {
+                    jac[(d, idx.len() - 1)] = fm.light;
+                }
             }
             let gj = gm * &jac;
             let hl = jac.transpose() * gj;

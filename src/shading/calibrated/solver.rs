@@ -76,6 +76,12 @@ fn fix_gauge(lay: &Layout, p: &mut [f64], reference: usize) {
             p[lay.c_off(c) + j] *= k;
         }
     }
+    // The gathered light was gathered with the old rho: its factor g_f k_c is kept.
+    if lay.gathered {
+        for c in 0..3 {
+            p[lay.k_off() + c] *= k;
+        }
+    }
 }
 
 /// Solve the block of parameters `idx` exactly (the model is linear in each block):
