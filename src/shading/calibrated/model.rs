@@ -303,6 +303,53 @@ mod tests {
     }
 
     #[test]
+    fn an_older_model_loads_and_a_gathered_one_keeps_its_factor() {
+        // shading.json's calibrated light as written before the gathered inter-reflection.
+        let old = r#"{"rho": [[1.0, 2.0], [1.0, 2.0], [0.5, 1.0]], "s": [1.0, 0.8],
+            "cos_theta_edge": 0.5, "gains": [1.0, 1.2], "reference_frame": 0,
+            "ambient": [[0.01, 0.01, 0.01], [0.02, 0.02, 0.02]],
+            "interreflection": [0.05, 0.05, 0.05], "frame_light": [0.2, 0.4],
+            "rms_residual": [0.0, 0.0, 0.0], "samples_used": 10}"#;
+        let m: CalibratedModel = serde_json::from_str(old).unwrap();
+        m.validate().unwrap();
+        assert!(m.gathered.is_none() && m.frame_indirect.is_none());
+        let g = GatheredInterreflection {
+            k: [0.6, 0.5, 0.4],
+            nodes_across: 40,
+            rays: 36,
+            visibility: false,
+        };
+        let gathered = CalibratedModel {
+            ambient: None,
+            interreflection: None,
+            frame_light: None,
+            gathered: Some(g),
+            frame_indirect: Some(Arc::new(Vec::new())),
+            ..m.clone()
+        };
+        gathered.validate().unwrap();
+        let json = serde_json::to_string(&gathered).unwrap();
+        let back: CalibratedModel = serde_json::from_str(&json).unwrap();
+        // The factor is saved; the frames' gathered light is build-time only.
+        assert_eq!(back.gathered, Some(g));
+        assert!(back.frame_indirect.is_none());
+        let both = CalibratedModel {
+            interreflection: m.interreflection,
+            frame_light: m.frame_light.clone(),
+            ..gathered.clone()
+        };
+        assert!(both.validate().is_err());
+        let negative = CalibratedModel {
+            gathered: Some(GatheredInterreflection {
+                k: [-0.1, 0.5, 0.4],
+                ..g
+            }),
+            ..gathered
+        };
+        assert!(negative.validate().unwrap_err().contains("gathered.k"));
+    }
+
+    #[test]
     fn a_new_view_reflects_its_own_light() {
         // Two frames: kappa L_f plus a free term of 0.01 per unit gain in every channel.
         let kappa = [0.05, 0.04, 0.03];

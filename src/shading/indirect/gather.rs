@@ -22,6 +22,9 @@
 //! sends nothing backward; the phantom's cone is cos theta there, issue 18's Mitsuba spot is 0
 //! beyond 70°).
 
+// `!(x > t)` on floats is deliberate: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use rayon::prelude::*;
 
 use crate::raycast::Scene;
