@@ -55,10 +55,10 @@ pub struct CalibratedOptions {
     /// 0.2-0.4 dB; with a uniform albedo it recovers the cone profile to 0.15% RMS (4.8%
     /// without). See BENCHMARKS.md "Inter-reflection".
     pub interreflection: bool,
-    /// With `interreflection`: fit it as `g_f alb k_c E_c` per sample, E the light gathered
+    /// Fit the gathered inter-reflection `g_f alb k_c E_c` per sample, E the light gathered
     /// from the mesh at the sample's surface point ([`PooledSamples::indirect`], which must be
-    /// set), instead of `kappa_c L_f`; excludes `ambient`. Default false (the build chooses
-    /// with `--interreflection`).
+    /// set), beside `kappa_c L_f` when `interreflection` is also set. Default false (the build
+    /// chooses with `--interreflection`).
     pub gathered: bool,
     /// Frame whose gain is fixed to 1. Default 0.
     pub reference_frame: usize,
@@ -179,12 +179,10 @@ fn check_inputs(samples: &PooledSamples, density: &[f32], opts: &CalibratedOptio
             .indirect
             .as_ref()
             .is_some_and(|e| e.iter().all(|v| v.len() == samples.len()));
-        if !ok || !opts.interreflection || opts.ambient {
+        if !ok {
             return Err(ShadingError::BadOptions {
                 fit: FIT,
-                message: "the gathered inter-reflection needs every sample's gathered light, \
-                          the inter-reflection on and no per-frame ambient term"
-                    .into(),
+                message: "the gathered inter-reflection needs every sample's gathered light".into(),
             }
             .into());
         }
@@ -350,7 +348,7 @@ fn params_of(lay: &Layout, m: &CalibratedModel) -> Result<Vec<f64>> {
     p[lay.e_off()..lay.e_off() + lay.ns - 1].copy_from_slice(&m.s[1..]);
     p[lay.g_off()..lay.g_off() + lay.frames].copy_from_slice(&m.gains);
     if let (true, Some(g)) = (lay.gathered, &m.gathered) {
-        p[lay.k_off()..lay.k_off() + 3].copy_from_slice(&g.k);
+        p[lay.q_off()..lay.q_off() + 3].copy_from_slice(&g.k);
     }
     if lay.ambient {
         for (f, a) in m.ambient.as_ref().into_iter().flatten().enumerate() {
@@ -377,7 +375,7 @@ fn model_of(
         cos_theta_edge: cos_edge,
         gains: p[lay.g_off()..lay.g_off() + lay.frames].to_vec(),
         reference_frame: reference,
-        ambient: (lay.ambient || (lay.interreflection && !lay.gathered)).then(|| {
+        ambient: (lay.ambient || lay.interreflection).then(|| {
             (0..lay.frames)
                 .map(|f| {
                     let light = frame_light.get(f).copied().unwrap_or(0.0);
@@ -385,12 +383,13 @@ fn model_of(
                 })
                 .collect()
         }),
-        interreflection: (lay.interreflection && !lay.gathered)
+        interreflection: lay
+            .interreflection
             .then(|| std::array::from_fn(|c| p[lay.k_off() + c])),
-        frame_light: (lay.interreflection && !lay.gathered).then(|| frame_light.to_vec()),
+        frame_light: lay.interreflection.then(|| frame_light.to_vec()),
         // The caller records how the light was gathered.
         gathered: lay.gathered.then(|| GatheredInterreflection {
-            k: std::array::from_fn(|c| p[lay.k_off() + c]),
+            k: std::array::from_fn(|c| p[lay.q_off() + c]),
             nodes_across: 1,
             rays: 1,
             visibility: false,

@@ -52,7 +52,8 @@ pub struct CalibratedModel {
     pub frame_light: Option<Vec<f64>>,
     /// The gathered inter-reflection (`--interreflection gathered`): each pixel adds
     /// `g_f alb k_c E_c`, E the light of the frame's own lamp once reflected by the wall,
-    /// gathered from the mesh ([`crate::shading::indirect`]). In place of `interreflection`.
+    /// gathered from the mesh ([`crate::shading::indirect`]); beside `interreflection` or
+    /// alone.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gathered: Option<GatheredInterreflection>,
     /// E of every fitted frame (build time only, not saved: new views gather their own).
@@ -249,11 +250,6 @@ impl CalibratedModel {
         }
         if let Some(g) = &self.gathered {
             g.validate()?;
-            if self.interreflection.is_some() {
-                return Err(
-                    "calibrated.gathered and calibrated.interreflection exclude each other".into(),
-                );
-            }
         }
         if self.interreflection.is_some() != self.frame_light.is_some() {
             return Err(
@@ -333,12 +329,6 @@ mod tests {
         // The factor is saved; the frames' gathered light is build-time only.
         assert_eq!(back.gathered, Some(g));
         assert!(back.frame_indirect.is_none());
-        let both = CalibratedModel {
-            interreflection: m.interreflection,
-            frame_light: m.frame_light.clone(),
-            ..gathered.clone()
-        };
-        assert!(both.validate().is_err());
         let negative = CalibratedModel {
             gathered: Some(GatheredInterreflection {
                 k: [-0.1, 0.5, 0.4],

@@ -30,7 +30,7 @@ fn predict(
         let light = samples.frame_light.get(f).copied().unwrap_or(0.0);
         let mut amb = super::moments::ambient_of(lay, p, light, f, c);
         if let (true, Some(e)) = (lay.gathered, &samples.indirect) {
-            amb *= alb * f64::from(e[c][i]);
+            amb += super::moments::gathered_of(lay, p, f, c) * alb * f64::from(e[c][i]);
         }
         k * alb * bernstein_eval(&p[lay.c_off(c)..lay.c_off(c) + lay.nr], gam) + amb
     })

@@ -7,6 +7,19 @@ use crate::shading::Robust;
 
 #[test]
 fn fit_recovers_a_known_gathered_factor() {
+    recover(false);
+}
+
+#[test]
+fn fit_recovers_the_gathered_factor_beside_kappa() {
+    recover(true);
+}
+
+/// Samples of a light with a gathered term (and, when `with_kappa`, `kappa_c L_f` beside it);
+/// the fit must give back k (and kappa) and the gains.
+fn recover(with_kappa: bool) {
+    let kappa = [0.05, 0.03, 0.02];
+    let frame_light = [0.10, 0.25, 0.15, 0.30];
     let rho = [
         vec![0.4, 1.2, 1.8, 2.0],
         vec![0.3, 0.8, 1.1, 1.3],
@@ -40,17 +53,21 @@ fn fit_recovers_a_known_gathered_factor() {
             for c in 0..3 {
                 let el = light * [1.0, 0.7, 0.5][c];
                 e[c].push(el as f32);
-                let v = g * (bernstein_eval(&rho[c], gamma) * direct + k[c] * el);
+                let mut v = g * (bernstein_eval(&rho[c], gamma) * direct + k[c] * el);
+                if with_kappa {
+                    v += kappa[c] * frame_light[f];
+                }
                 p.rgb[c].push(v as f32);
             }
         }
         p.frame_start.push(p.gamma.len());
         p.excluded.push(Default::default());
-        p.frame_light.push(0.1);
+        p.frame_light.push(frame_light[f]);
     }
     p.indirect = Some(e);
     let opts = CalibratedOptions {
         gathered: true,
+        interreflection: with_kappa,
         robust: Robust::None,
         ..Default::default()
     };
@@ -63,7 +80,15 @@ fn fit_recovers_a_known_gathered_factor() {
     for (f, g) in gains.iter().enumerate() {
         assert!((m.gains[f] / g - 1.0).abs() < 0.005, "gains {:?}", m.gains);
     }
-    assert!(m.interreflection.is_none() && m.ambient.is_none());
+    match m.interreflection {
+        Some(got) if with_kappa => {
+            for c in 0..3 {
+                assert!((got[c] / kappa[c] - 1.0).abs() < 0.01, "kappa {got:?}");
+            }
+        }
+        None if !with_kappa => assert!(m.ambient.is_none()),
+        other => panic!("kappa {other:?} (fitted: {with_kappa})"),
+    }
     // Without the samples' gathered light the gathered fit refuses to run.
     p.indirect = None;
     assert!(fit_calibrated(&p, &density, &opts).is_err());

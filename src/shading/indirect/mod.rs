@@ -38,6 +38,9 @@ pub enum InterreflectionMode {
     /// `g_f alb(x) k_c E_c(x)`: the lamp's light once reflected by the wall, gathered from the
     /// mesh at every surface point.
     Gathered,
+    /// Both terms: the gathered light and `kappa_c L_f` beside it (what the gather misses:
+    /// later bounces, light the mesh does not hold).
+    Both,
 }
 
 /// How the gathered inter-reflection is sampled, as recorded in shading.json.

@@ -78,13 +78,12 @@ pub fn calibrated_light(
             return Ok(None);
         }
     };
-    let gathered = opts.interreflection == InterreflectionMode::Gathered
-        && cal_opts.interreflection
-        && !cal_opts.ambient;
+    let gathered = opts.interreflection != InterreflectionMode::Uniform;
     if gathered {
         // The uniform fit's light, once reflected by a uniform wall, is each sample's first
         // gathered light; the fit then takes k_c in place of kappa_c.
         cal_opts.gathered = true;
+        cal_opts.interreflection &= opts.interreflection == InterreflectionMode::Both;
         let settings = gather_settings(opts);
         let fields = gather_all(scene, &model, &UniformAlbedo, &settings);
         set_sample_light(scene, &mut samples.pooled, &fields);
@@ -121,11 +120,7 @@ pub fn calibrated_light(
         robust: cal_opts.robust.to_string(),
         ambient_per_frame: cal_opts.ambient,
         interreflection: cal_opts.interreflection,
-        interreflection_mode: if gathered {
-            InterreflectionMode::Gathered
-        } else {
-            InterreflectionMode::Uniform
-        },
+        interreflection_mode: opts.interreflection,
         reference_frame: model.reference_frame,
         gain_corrections: opts.refine_gains,
         light_refits: opts.refine_light,
