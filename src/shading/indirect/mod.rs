@@ -204,6 +204,75 @@ mod tests {
         }
     }
 
+    /// A new view from the centre of a sphere of radius 8 mm: every pixel sees the wall at
+    /// z = R, gamma = 1, so the direct light is rho1 / R^2 = 1 and the gathered light
+    /// k_c rho1 / R^2 = k_c (see the closed form above) with a uniform texture.
+    #[test]
+    fn a_new_view_adds_its_own_gathered_light() {
+        use crate::image::Frame;
+        use crate::render::{render_view, MipOptions, MipTexture, RenderInputs, RenderOptions};
+        use crate::shading::{FittedShading, ShadingKind};
+        let r = 8.0f32;
+        let scene = Scene::new(&sphere(r, 48, 96)).unwrap();
+        let k = [0.5, 0.4, 0.3];
+        let model = CalibratedModel {
+            gathered: Some(GatheredInterreflection {
+                k,
+                nodes_across: 6,
+                rays: 256,
+                visibility: false,
+            }),
+            ..lambertian([64.0; 3])
+        };
+        let image = Frame {
+            width: 4,
+            height: 4,
+            rgb: vec![0.8; 48],
+        };
+        let texture = MipTexture::new(&image, None, 0.5, &MipOptions::default()).unwrap();
+        let tri_uv = vec![[[0.5f32, 0.5]; 3]; scene.triangle_count()];
+        let camera = Camera {
+            width: 24,
+            height: 18,
+            fx: 12.0,
+            fy: 12.0,
+            cx: 11.5,
+            cy: 8.5,
+            k1: 0.0,
+            k2: 0.0,
+            p1: 0.0,
+            p2: 0.0,
+            k3: 0.0,
+        };
+        let render = |m: CalibratedModel| {
+            let shading = FittedShading::new(ShadingKind::Calibrated, Vec::new(), Some(m));
+            let inputs = RenderInputs {
+                scene: &scene,
+                tri_uv: &tri_uv,
+                texture: &texture,
+                shading: &shading,
+                kind: ShadingKind::Calibrated,
+            };
+            let pose = Affine::identity();
+            render_view(&inputs, &camera, &pose, &RenderOptions::default())
+                .unwrap()
+                .0
+        };
+        let with = render(model.clone());
+        let without = render(CalibratedModel {
+            gathered: None,
+            ..model
+        });
+        for (a, b) in with.rgb.chunks_exact(3).zip(without.rgb.chunks_exact(3)) {
+            for c in 0..3 {
+                // The texture's albedo 0.8 multiplies both terms.
+                assert!((b[c] / 0.8 - 1.0).abs() < 0.01, "direct {b:?}");
+                let gathered = (a[c] - b[c]) / 0.8;
+                assert!((gathered / k[c] as f32 - 1.0).abs() < 0.04, "{a:?} {b:?}");
+            }
+        }
+    }
+
     #[test]
     fn a_view_inside_a_sphere_gathers_the_same_light_everywhere() {
         let r = 8.0f32;

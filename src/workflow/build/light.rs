@@ -6,10 +6,10 @@
 //! 4. refits of the light's shape with the fused texture's albedo, each followed by one more
 //!    gain correction ([`super::light_refit`], `--light-refits`).
 //!
-//! With `--interreflection gathered` the uniform fit of step 1 lights the wall once: each
-//! sample's gathered light ([`crate::shading::indirect`]) replaces `kappa_c L_f`, the light is
-//! fitted again with it, and every later step gathers again with the light (and, in step 4,
-//! the fused texture's albedo) it has by then.
+//! With `--interreflection gathered` (or `both`) the uniform fit of step 1 lights the wall
+//! once: each sample's gathered light ([`crate::shading::indirect`]) replaces `kappa_c L_f`
+//! (`both`: joins it), the light is fitted again with it, and the later steps gather again
+//! with the light (and, in step 4, the fused texture's albedo) they have by then.
 
 use std::borrow::Cow;
 use std::sync::Arc;
@@ -81,7 +81,7 @@ pub fn calibrated_light(
     let gathered = opts.interreflection != InterreflectionMode::Uniform;
     if gathered {
         // The uniform fit's light, once reflected by a uniform wall, is each sample's first
-        // gathered light; the fit then takes k_c in place of kappa_c.
+        // gathered light; the fit then takes k_c in place of kappa_c (beside it: `both`).
         cal_opts.gathered = true;
         cal_opts.interreflection &= opts.interreflection == InterreflectionMode::Both;
         let settings = gather_settings(opts);
@@ -129,7 +129,7 @@ pub fn calibrated_light(
     Ok(Some(CalibratedLight { model, settings }))
 }
 
-/// The gather of `--interreflection gathered` as the build options set it.
+/// The gather of `--interreflection gathered|both` as the build options set it.
 fn gather_settings(opts: &BuildOptions) -> GatheredInterreflection {
     GatheredInterreflection {
         k: [0.0; 3],
