@@ -117,6 +117,8 @@ fn bench(c: &mut Criterion) {
         ambient: None,
         interreflection: None,
         frame_light: None,
+        gathered: None,
+        frame_indirect: None,
         auto_exposure: None,
         rms_residual: [0.0; 3],
         samples_used: 0,

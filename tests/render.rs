@@ -492,6 +492,8 @@ fn calibrated_new_views_reflect_their_own_light() {
         ambient: Some(vec![[0.0; 3]]),
         interreflection: Some(kappa),
         frame_light: Some(vec![0.0]),
+        gathered: None,
+        frame_indirect: None,
         auto_exposure: None,
         rms_residual: [0.0; 3],
         samples_used: 0,

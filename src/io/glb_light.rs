@@ -267,6 +267,8 @@ mod tests {
             ambient: None,
             interreflection: None,
             frame_light: None,
+            gathered: None,
+            frame_indirect: None,
             auto_exposure: None,
             rms_residual: [0.0; 3],
             samples_used: 0,

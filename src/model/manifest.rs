@@ -131,6 +131,10 @@ pub struct LightFitSettings {
     pub ambient_per_frame: bool,
     /// Inter-reflection term kappa times the frame's mean light (off with `--no-interreflection`).
     pub interreflection: bool,
+    /// `uniform` (kappa times the frame's light) or `gathered` from the mesh
+    /// (`--interreflection`); models built before it are uniform.
+    #[serde(default)]
+    pub interreflection_mode: crate::shading::indirect::InterreflectionMode,
     /// Frame whose gain is 1 (the exposure of new views).
     pub reference_frame: usize,
     /// Refits of the light and its gains with the albedo predicted from each pixel's colour

@@ -1,6 +1,7 @@
 //! Rendering a new view (paper §2.4): ray cast the mesh from the new viewpoint, shade with the
 //! fitted shading evaluated at the new view's gamma, z and theta (the light moves with the
-//! camera), multiply by the fused albedo texture.
+//! camera), multiply by the fused albedo texture; with the gathered inter-reflection, add the
+//! view's own light once reflected by the wall (`shading::indirect`) times the albedo.
 
 use rayon::prelude::*;
 
@@ -11,6 +12,7 @@ use crate::image::ImageError;
 use crate::math::Affine;
 use crate::mesh::GeometryError;
 use crate::raycast::Scene;
+use crate::shading::indirect::{gather_grid, IndirectField, TextureAlbedo, ViewGrid};
 use crate::shading::paper::PsiLookup;
 use crate::shading::{masked_luminance_sum, FittedShading, ShadingKind};
 use crate::texture::atlas::Atlas;
@@ -183,6 +185,7 @@ pub fn render_view_with(
     let (w, h) = (rays.width as usize, rays.height as usize);
     let ss = (rays.supersample as usize).pow(2);
     let tex = inputs.texture;
+    let indirect = gathered_light(inputs, rays, camera_to_world, opts);
     // The footprint of one sub-pixel ray: the pixel angle shrinks with supersampling.
     let angle_scale = 1.0 / rays.supersample as f32;
 
@@ -245,6 +248,12 @@ pub fn render_view_with(
                         for k in 0..3 {
                             acc[k] += scale[k] * albedo[k] + offset[k];
                         }
+                        if let Some((field, kc)) = &indirect {
+                            let e = field.at_pixel(p, w, h);
+                            for k in 0..3 {
+                                acc[k] += kc[k] * e[k] * albedo[k];
+                            }
+                        }
                         n_hit += 1;
                     }
                     if n_hit > 0 {
@@ -264,6 +273,48 @@ pub fn render_view_with(
         }
     }
     Ok((frame, mask))
+}
+
+/// The gathered inter-reflection of the view's own light with the texture's albedo, and its
+/// factor k_c, when the calibrated light shades the view with it.
+fn gathered_light(
+    inputs: &RenderInputs,
+    rays: &ViewRays,
+    camera_to_world: &Affine,
+    opts: &RenderOptions,
+) -> Option<(IndirectField, [f32; 3])> {
+    let model = match (inputs.kind, &inputs.shading.calibrated) {
+        (ShadingKind::Calibrated, Some(m)) if !opts.albedo_only => m,
+        _ => return None,
+    };
+    let g = model.gathered?;
+    let (w, h) = (rays.width as usize, rays.height as usize);
+    let ss = (rays.supersample as usize).pow(2);
+    // The ray of the nearest pixel's first sub-pixel ray: the field is low-frequency.
+    let ray = |x: f64, y: f64| {
+        let (i, j) = (
+            (x.round().max(0.0) as usize).min(w - 1),
+            (y.round().max(0.0) as usize).min(h - 1),
+        );
+        rays.dirs[(j * w + i) * ss].map(f64::from)
+    };
+    let view = ViewGrid {
+        width: rays.width,
+        height: rays.height,
+        nodes_across: g.nodes_across,
+        ray: &ray,
+    };
+    let albedo = TextureAlbedo::new(inputs.texture, inputs.tri_uv);
+    let field = gather_grid(
+        inputs.scene,
+        &view,
+        camera_to_world,
+        model,
+        &albedo,
+        0,
+        &g.gather_options(),
+    );
+    Some((field, g.k.map(|k| k as f32)))
 }
 
 /// The auto-exposure gain of a view rendered at exposure `gain` (the mean luminance over its

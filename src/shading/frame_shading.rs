@@ -74,6 +74,24 @@ impl FrameShading<'_> {
         }
     }
 
+    /// The gathered inter-reflection's part of the scale at normalised image coordinates
+    /// (u, v) (see `IndirectField::at`): `g_f k_c E_c`, zeros for Psi, without the gathered term
+    /// or without the frame's gathered light.
+    #[inline]
+    pub fn indirect_scale(&self, u: f64, v: f64) -> [f64; 3] {
+        let FrameShading::Calibrated { model, frame } = self else {
+            return [0.0; 3];
+        };
+        let (Some(g), Some(fields)) = (&model.gathered, &model.frame_indirect) else {
+            return [0.0; 3];
+        };
+        let (Some(field), Some(gain)) = (fields.get(*frame), model.gains.get(*frame)) else {
+            return [0.0; 3];
+        };
+        let e = field.at(u, v);
+        std::array::from_fn(|c| gain * g.k[c] * f64::from(e[c]))
+    }
+
     /// Check the model's numbers; the message says what is wrong.
     pub fn validate(&self) -> Result<(), String> {
         match self {
@@ -159,6 +177,8 @@ mod tests {
             ambient: Some(vec![[0.0; 3], [0.1, 0.2, 0.3]]),
             interreflection: None,
             frame_light: None,
+            gathered: None,
+            frame_indirect: None,
             auto_exposure: None,
             rms_residual: [0.0; 3],
             samples_used: 0,

@@ -24,6 +24,7 @@ pub mod density;
 pub mod error;
 pub mod fitted;
 pub mod frame_shading;
+pub mod indirect;
 pub mod kind;
 pub mod paper;
 pub mod plotting;

@@ -1,8 +1,8 @@
 //! Texel-centric de-lighting (paper §2.4): every texel is projected into a frame through the
 //! lens model, tested for visibility against the frame's depth buffer, sampled bilinearly and
 //! divided by the frame's shading: the paper's `Psi_p(gamma, z)`, or the calibrated light
-//! `g_f rho(gamma) s(theta) / z²` after subtracting its inter-reflection term
-//! ([`FrameShading`]).
+//! `g_f rho(gamma) s(theta) / z²` after subtracting its inter-reflection term, plus the
+//! gathered inter-reflection `g_f k_c E_c` at the texel's pixel when fitted ([`FrameShading`]).
 //!
 //! A texel gives no value for a frame when it is behind the camera or outside the image, when
 //! it faces away or is grazing (`gamma < min_gamma`), when any of the four pixels of its
@@ -347,7 +347,14 @@ impl<'a> FrameCtx<'a> {
             }
             px[k] = q;
         }
-        let shade = self.shading.shade(gamma, d, pc[2] / d);
+        let mut shade = self.shading.shade(gamma, d, pc[2] / d);
+        let extra = self.shading.indirect_scale(
+            (u + 0.5) / self.width as f64,
+            (vv + 0.5) / self.height as f64,
+        );
+        for (s, e) in shade.scale.iter_mut().zip(extra) {
+            *s += e;
+        }
         let psi = shade.scale;
         if !psi.iter().all(|&s| s > 1e-9 && s.is_finite()) {
             return None;

@@ -167,6 +167,21 @@ pub struct BuildArgs {
     /// observed light, 3 parameters for the whole video; see BENCHMARKS.md).
     #[arg(long)]
     pub no_interreflection: bool,
+    /// Inter-reflection: `uniform` (kappa times each frame's mean light) or `gathered` (the
+    /// light once reflected by the wall, gathered from the mesh at every surface point).
+    #[arg(long, value_enum, default_value_t = build_defaults().interreflection)]
+    pub interreflection: bronchosim::shading::indirect::InterreflectionMode,
+    /// Grid nodes across each frame the gathered inter-reflection is gathered at.
+    #[arg(long, value_name = "N", default_value_t = build_defaults().gather_nodes,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=4096))]
+    pub gather_nodes: usize,
+    /// Hemisphere rays per node of the gathered inter-reflection.
+    #[arg(long, value_name = "N", default_value_t = build_defaults().gather_rays,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=65536))]
+    pub gather_rays: usize,
+    /// Test each bounce point of the gathered inter-reflection for visibility from the light.
+    #[arg(long)]
+    pub gather_visibility: bool,
     /// Rounds of refitting the calibrated light and its gains with each pixel's albedo
     /// predicted from its colour (0 keeps the uniform albedo; see BENCHMARKS.md).
     #[arg(long, default_value_t = build_defaults().chroma_refits)]

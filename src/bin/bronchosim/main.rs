@@ -88,6 +88,10 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
     opts.segment.mesh.decimate.target_edge_mm = a.edge_mm;
     opts.calibrated.ambient = a.ambient;
     opts.calibrated.interreflection = !a.no_interreflection;
+    opts.interreflection = a.interreflection;
+    opts.gather_nodes = a.gather_nodes;
+    opts.gather_rays = a.gather_rays;
+    opts.gather_visibility = a.gather_visibility;
     opts.fusion.method = FusionMethod::of_kind(a.fusion, a.fusion_weight_exponent);
     let m = build_model(&a.case, &a.out, &opts)
         .with_context(|| format!("build {}", a.case.display()))?;

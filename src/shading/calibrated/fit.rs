@@ -24,14 +24,14 @@
 
 use super::model::CalibratedModel;
 use super::moments::{accumulate, cost, t_of, Layout};
+use super::residuals::{residual_rms, robust_weights};
 use super::samples::PooledSamples;
 use super::solver::{bounds, clamp_to, min_positive, rho_scale, solve};
-use crate::shading::bernstein::bernstein_eval;
 use crate::shading::error::check_weights;
+use crate::shading::indirect::GatheredInterreflection;
 use crate::shading::robust::Robust;
 use crate::shading::ShadingError;
 use crate::Result;
-use rayon::prelude::*;
 
 /// The name errors give this fit.
 const FIT: &str = "calibrated fit";
@@ -55,6 +55,11 @@ pub struct CalibratedOptions {
     /// 0.2-0.4 dB; with a uniform albedo it recovers the cone profile to 0.15% RMS (4.8%
     /// without). See BENCHMARKS.md "Inter-reflection".
     pub interreflection: bool,
+    /// Fit the gathered inter-reflection `g_f alb k_c E_c` per sample, E the light gathered
+    /// from the mesh at the sample's surface point ([`PooledSamples::indirect`], which must be
+    /// set), beside `kappa_c L_f` when `interreflection` is also set. Default false (the build
+    /// chooses with `--interreflection`).
+    pub gathered: bool,
     /// Frame whose gain is fixed to 1. Default 0.
     pub reference_frame: usize,
     /// Most alternation rounds (each: rho, s, gains). Default 40.
@@ -89,6 +94,7 @@ impl Default for CalibratedOptions {
             s_degree: 3,
             ambient: false,
             interreflection: true,
+            gathered: false,
             reference_frame: 0,
             max_alternations: 40,
             tolerance: 1e-10,
@@ -168,6 +174,19 @@ fn check_inputs(samples: &PooledSamples, density: &[f32], opts: &CalibratedOptio
         + opts.s_degree
         + f * if opts.ambient { 4 } else { 1 }
         + if opts.interreflection { 3 } else { 0 };
+    if opts.gathered {
+        let ok = samples
+            .indirect
+            .as_ref()
+            .is_some_and(|e| e.iter().all(|v| v.len() == samples.len()));
+        if !ok {
+            return Err(ShadingError::BadOptions {
+                fit: FIT,
+                message: "the gathered inter-reflection needs every sample's gathered light".into(),
+            }
+            .into());
+        }
+    }
     if opts.interreflection && samples.frame_light.len() != f {
         return Err(ShadingError::LengthMismatch {
             fit: FIT,
@@ -223,6 +242,7 @@ fn fit_inner(
         frames: samples.frames(),
         ambient: opts.ambient,
         interreflection: opts.interreflection,
+        gathered: opts.gathered,
     };
     let cos_edge = match init {
         Some(m) => m.cos_theta_edge,
@@ -284,6 +304,11 @@ fn fit_inner(
         rms,
         samples.len(),
     );
+    let mut model = model;
+    if let (Some(g), Some(Some(i))) = (model.gathered.as_mut(), init.map(|m| m.gathered)) {
+        // The gather's settings stay those of the light the samples were gathered with.
+        (g.nodes_across, g.rays, g.visibility) = (i.nodes_across, i.rays, i.visibility);
+    }
     Ok(CalibratedFit {
         model,
         report: rep,
@@ -322,6 +347,9 @@ fn params_of(lay: &Layout, m: &CalibratedModel) -> Result<Vec<f64>> {
     }
     p[lay.e_off()..lay.e_off() + lay.ns - 1].copy_from_slice(&m.s[1..]);
     p[lay.g_off()..lay.g_off() + lay.frames].copy_from_slice(&m.gains);
+    if let (true, Some(g)) = (lay.gathered, &m.gathered) {
+        p[lay.q_off()..lay.q_off() + 3].copy_from_slice(&g.k);
+    }
     if lay.ambient {
         for (f, a) in m.ambient.as_ref().into_iter().flatten().enumerate() {
             p[lay.a_off() + 3 * f..lay.a_off() + 3 * f + 3].copy_from_slice(a);
@@ -359,124 +387,16 @@ fn model_of(
             .interreflection
             .then(|| std::array::from_fn(|c| p[lay.k_off() + c])),
         frame_light: lay.interreflection.then(|| frame_light.to_vec()),
+        // The caller records how the light was gathered.
+        gathered: lay.gathered.then(|| GatheredInterreflection {
+            k: std::array::from_fn(|c| p[lay.q_off() + c]),
+            nodes_across: 1,
+            rays: 1,
+            visibility: false,
+        }),
+        frame_indirect: None,
         auto_exposure: None,
         rms_residual: rms,
         samples_used: n,
     }
-}
-
-/// The model's prediction per channel for sample i (albedo included when given).
-#[inline]
-fn predict(
-    lay: &Layout,
-    p: &[f64],
-    s_coeffs: &[f64],
-    samples: &PooledSamples,
-    t: &[f32],
-    albedo: Option<&[Vec<f32>; 3]>,
-    i: usize,
-) -> [f64; 3] {
-    let f = samples.frame[i] as usize;
-    let z = f64::from(samples.z[i]);
-    let gam = f64::from(samples.gamma[i]);
-    let k = p[lay.g_off() + f] * bernstein_eval(s_coeffs, f64::from(t[i])) / (z * z);
-    std::array::from_fn(|c| {
-        let alb = albedo.map_or(1.0, |a| f64::from(a[c][i]));
-        let light = samples.frame_light.get(f).copied().unwrap_or(0.0);
-        let amb = super::moments::ambient_of(lay, p, light, f, c);
-        k * alb * bernstein_eval(&p[lay.c_off(c)..lay.c_off(c) + lay.nr], gam) + amb
-    })
-}
-
-fn s_coeffs(lay: &Layout, p: &[f64]) -> Vec<f64> {
-    let mut s = vec![1.0];
-    s.extend_from_slice(&p[lay.e_off()..lay.e_off() + lay.ns - 1]);
-    s
-}
-
-/// New weights: `base x robust(u / sigma)` with u the RMS over channels of the relative
-/// residual `(I - pred) / (|pred| + floor)` and sigma its robust scale.
-fn robust_weights(
-    samples: &PooledSamples,
-    t: &[f32],
-    base: &[f32],
-    albedo: Option<&[Vec<f32>; 3]>,
-    lay: &Layout,
-    p: &[f64],
-    opts: &CalibratedOptions,
-) -> Vec<f32> {
-    let sc = s_coeffs(lay, p);
-    let u: Vec<f32> = (0..samples.len())
-        .into_par_iter()
-        .with_min_len(4096)
-        .map(|i| {
-            if base[i] == 0.0 {
-                return f32::NAN;
-            }
-            let pr = predict(lay, p, &sc, samples, t, albedo, i);
-            let ss: f64 = (0..3)
-                .map(|c| {
-                    let e = (f64::from(samples.rgb[c][i]) - pr[c])
-                        / (pr[c].abs() + opts.relative_floor);
-                    e * e
-                })
-                .sum();
-            (ss / 3.0).sqrt() as f32
-        })
-        .collect();
-    let mut v: Vec<f32> = u.iter().copied().filter(|x| x.is_finite()).collect();
-    if v.is_empty() {
-        return base.to_vec();
-    }
-    let mid = v.len() / 2;
-    let med = f64::from(*v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1);
-    // The median of sqrt(chi²_3 / 3) is 0.888 sigma.
-    let sigma = (med / 0.888).max(1e-9);
-    u.iter()
-        .zip(base)
-        .map(|(&ui, &bi)| {
-            if !ui.is_finite() {
-                return 0.0;
-            }
-            (f64::from(bi) * opts.robust.weight(f64::from(ui) / sigma)) as f32
-        })
-        .collect()
-}
-
-/// Weighted RMS residual per channel and the weight sum.
-fn residual_rms(
-    samples: &PooledSamples,
-    t: &[f32],
-    w: &[f32],
-    albedo: Option<&[Vec<f32>; 3]>,
-    lay: &Layout,
-    p: &[f64],
-) -> ([f64; 3], f64) {
-    let sc = s_coeffs(lay, p);
-    let (sums, ws) = (0..samples.len())
-        .into_par_iter()
-        .with_min_len(4096)
-        .fold(
-            || ([0.0f64; 3], 0.0f64),
-            |(mut acc, ws), i| {
-                let wi = f64::from(w[i]);
-                if wi == 0.0 {
-                    return (acc, ws);
-                }
-                let pr = predict(lay, p, &sc, samples, t, albedo, i);
-                for c in 0..3 {
-                    let e = f64::from(samples.rgb[c][i]) - pr[c];
-                    acc[c] += wi * e * e;
-                }
-                (acc, ws + wi)
-            },
-        )
-        .reduce(
-            || ([0.0; 3], 0.0),
-            |(a, wa), (b, wb)| ([a[0] + b[0], a[1] + b[1], a[2] + b[2]], wa + wb),
-        );
-    (
-        std::array::from_fn(|c| (sums[c] / ws.max(1e-300)).sqrt()),
-        ws,
-    )
 }

@@ -14,6 +14,7 @@ pub mod model;
 mod moments;
 pub mod plots;
 pub mod predict;
+mod residuals;
 pub mod samples;
 mod solver;
 

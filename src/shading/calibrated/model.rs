@@ -8,13 +8,18 @@
 //! absolute distance (mm, never normalised or clamped); g_f is the frame's auto-exposure gain
 //! (1 for the reference frame); a_f the inter-reflected light of frame f: by default
 //! `kappa_c · L_f`, three parameters for the video times the frame's mean observed luminance
-//! (see `calibrated_fit::CalibratedOptions::interreflection`), or free per frame (`--ambient`).
+//! (see `calibrated_fit::CalibratedOptions::interreflection`), or free per frame (`--ambient`);
+//! or, with `--interreflection gathered`, `g_f alb(x) k_c E_c(x)` with E gathered from the
+//! mesh (`shading::indirect`).
 
 use crate::shading::frame_shading::LUMA;
 use serde::{Deserialize, Serialize};
 
+use std::sync::Arc;
+
 use super::exposure::AutoExposure;
 use crate::shading::bernstein::bernstein_eval;
+use crate::shading::indirect::{GatheredInterreflection, IndirectField};
 
 /// The fitted calibrated light model, as stored under "calibrated" in `shading.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -45,6 +50,15 @@ pub struct CalibratedModel {
     /// intensity at that frame's gain), when the fit had the inter-reflection term.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frame_light: Option<Vec<f64>>,
+    /// The gathered inter-reflection (`--interreflection gathered`): each pixel adds
+    /// `g_f alb k_c E_c`, E the light of the frame's own lamp once reflected by the wall,
+    /// gathered from the mesh ([`crate::shading::indirect`]); beside `interreflection` or
+    /// alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gathered: Option<GatheredInterreflection>,
+    /// E of every fitted frame (build time only, not saved: new views gather their own).
+    #[serde(skip)]
+    pub frame_indirect: Option<Arc<Vec<IndirectField>>>,
     /// The scope's auto-exposure learnt from the gains (see [`AutoExposure`]); absent in models
     /// built before it was fitted, or when the video's frames did not vary in brightness.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -234,6 +248,9 @@ impl CalibratedModel {
         if let Some(ae) = &self.auto_exposure {
             ae.validate()?;
         }
+        if let Some(g) = &self.gathered {
+            g.validate()?;
+        }
         if self.interreflection.is_some() != self.frame_light.is_some() {
             return Err(
                 "calibrated.interreflection and calibrated.frame_light go together".to_string(),
@@ -258,6 +275,8 @@ mod tests {
             ambient: Some(vec![[0.0; 3], [0.01, 0.02, 0.03]]),
             interreflection: None,
             frame_light: None,
+            gathered: None,
+            frame_indirect: None,
             auto_exposure: None,
             rms_residual: [0.0; 3],
             samples_used: 0,
@@ -280,6 +299,47 @@ mod tests {
     }
 
     #[test]
+    fn an_older_model_loads_and_a_gathered_one_keeps_its_factor() {
+        // shading.json's calibrated light as written before the gathered inter-reflection.
+        let old = r#"{"rho": [[1.0, 2.0], [1.0, 2.0], [0.5, 1.0]], "s": [1.0, 0.8],
+            "cos_theta_edge": 0.5, "gains": [1.0, 1.2], "reference_frame": 0,
+            "ambient": [[0.01, 0.01, 0.01], [0.02, 0.02, 0.02]],
+            "interreflection": [0.05, 0.05, 0.05], "frame_light": [0.2, 0.4],
+            "rms_residual": [0.0, 0.0, 0.0], "samples_used": 10}"#;
+        let m: CalibratedModel = serde_json::from_str(old).unwrap();
+        m.validate().unwrap();
+        assert!(m.gathered.is_none() && m.frame_indirect.is_none());
+        let g = GatheredInterreflection {
+            k: [0.6, 0.5, 0.4],
+            nodes_across: 40,
+            rays: 36,
+            visibility: false,
+        };
+        let gathered = CalibratedModel {
+            ambient: None,
+            interreflection: None,
+            frame_light: None,
+            gathered: Some(g),
+            frame_indirect: Some(Arc::new(Vec::new())),
+            ..m.clone()
+        };
+        gathered.validate().unwrap();
+        let json = serde_json::to_string(&gathered).unwrap();
+        let back: CalibratedModel = serde_json::from_str(&json).unwrap();
+        // The factor is saved; the frames' gathered light is build-time only.
+        assert_eq!(back.gathered, Some(g));
+        assert!(back.frame_indirect.is_none());
+        let negative = CalibratedModel {
+            gathered: Some(GatheredInterreflection {
+                k: [-0.1, 0.5, 0.4],
+                ..g
+            }),
+            ..gathered
+        };
+        assert!(negative.validate().unwrap_err().contains("gathered.k"));
+    }
+
+    #[test]
     fn a_new_view_reflects_its_own_light() {
         // Two frames: kappa L_f plus a free term of 0.01 per unit gain in every channel.
         let kappa = [0.05, 0.04, 0.03];
@@ -297,6 +357,8 @@ mod tests {
             ambient: Some(ambient),
             interreflection: Some(kappa),
             frame_light: Some(light.to_vec()),
+            gathered: None,
+            frame_indirect: None,
             auto_exposure: None,
             rms_residual: [0.0; 3],
             samples_used: 0,

@@ -30,6 +30,10 @@ pub(crate) struct Layout {
     /// Whether the inter-reflection term `kappa_c L_f` is in the model (kappa_c: 3
     /// parameters; L_f: the frame's mean observed luminance, [`FrameMoments::light`]).
     pub interreflection: bool,
+    /// Whether the gathered inter-reflection is in the model: a second feature
+    /// `alb_c E_c` per sample (E: [`PooledSamples::indirect`]) with coefficient `g_f k_c`
+    /// (k_c: 3 parameters after kappa).
+    pub gathered: bool,
 }
 
 impl Layout {
@@ -57,9 +61,18 @@ impl Layout {
     pub fn k_off(&self) -> usize {
         self.a_off() + if self.ambient { 3 * self.frames } else { 0 }
     }
+    /// Offset of the gathered light's factor k (3 values, one per channel).
+    pub fn q_off(&self) -> usize {
+        self.k_off() + if self.interreflection { 3 } else { 0 }
+    }
+    /// Features after the shading ones: 1 (the light that does not depend on the surface),
+    /// and the gathered light when in the model.
+    pub fn extra(&self) -> usize {
+        1 + usize::from(self.gathered)
+    }
     /// Length of the parameter vector.
     pub fn len(&self) -> usize {
-        self.k_off() + if self.interreflection { 3 } else { 0 }
+        self.q_off() + if self.gathered { 3 } else { 0 }
     }
 }
 
@@ -122,8 +135,13 @@ pub(crate) fn accumulate(
     lay: &Layout,
 ) -> Vec<FrameMoments> {
     let d = lay.d();
-    let d1 = d + 1;
-    let nmat = if albedo.is_some() { 3 } else { 1 };
+    let d1 = d + lay.extra();
+    let nmat = if albedo.is_some() || lay.gathered {
+        3
+    } else {
+        1
+    };
+    let indirect = samples.indirect.as_ref().filter(|_| lay.gathered);
     (0..samples.frames())
         .into_par_iter()
         .map(|f| {
@@ -134,6 +152,7 @@ pub(crate) fn accumulate(
             let mut psi = vec![0.0f64; d1];
             let mut psic = vec![0.0f64; d1];
             psi[d] = 1.0;
+            let mut q = 0.0;
             for i in samples.frame_start[f]..samples.frame_start[f + 1] {
                 let wi = f64::from(w[i]);
                 if wi == 0.0 {
@@ -154,16 +173,27 @@ pub(crate) fn accumulate(
                     // Albedo scales the shading features only (the ambient light is not reflected
                     // off this texel alone).
                     let alb = albedo.map_or(1.0, |a| f64::from(a[c][i]));
+                    // The last features: 1 (the light that does not depend on the surface),
+                    // and the gathered light reflected by this texel.
+                    if let Some(e) = indirect {
+                        q = alb * f64::from(e[c][i]);
+                    }
                     let hc = &mut h[c];
                     for k in 0..d {
                         hc[k] += wi * p * alb * psi[k];
                     }
                     hc[d] += wi * p;
+                    if lay.gathered {
+                        hc[d + 1] += wi * p * q;
+                    }
                     if c < nmat {
                         for k in 0..d {
                             psic[k] = alb * psi[k];
                         }
                         psic[d] = 1.0;
+                        if lay.gathered {
+                            psic[d + 1] = q;
+                        }
                         let gm = &mut g[c];
                         for j in 0..d1 {
                             let a = wi * psic[j];
@@ -208,10 +238,15 @@ pub(crate) fn ambient_of(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize
     a
 }
 
+/// The coefficient `g_f k_c` of the gathered light of frame f, channel c.
+pub(crate) fn gathered_of(lay: &Layout, p: &[f64], f: usize, c: usize) -> f64 {
+    p[lay.g_off() + f] * p[lay.q_off() + c]
+}
+
 /// The coefficient vector `y_fc = (g_f vec(rho_c s^T), ambient_fc)` from the parameters.
 pub(crate) fn y_of(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize) -> DVector<f64> {
     let d = lay.d();
-    let mut y = DVector::zeros(d + 1);
+    let mut y = DVector::zeros(d + lay.extra());
     let gf = p[lay.g_off() + f];
     let rho = &p[lay.c_off(c)..lay.c_off(c) + lay.nr];
     for j in 0..lay.nr {
@@ -221,6 +256,9 @@ pub(crate) fn y_of(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize) -> D
         }
     }
     y[d] = ambient_of(lay, p, light, f, c);
+    if lay.gathered {
+        y[d + 1] = gathered_of(lay, p, f, c);
+    }
     y
 }
 
@@ -267,7 +305,10 @@ pub(crate) fn normal_equations(
             if lay.interreflection {
                 idx.push(lay.k_off() + c);
             }
-            let mut jac = DMatrix::zeros(d + 1, idx.len());
+            if lay.gathered {
+                idx.push(lay.q_off() + c);
+            }
+            let mut jac = DMatrix::zeros(d + lay.extra(), idx.len());
             let rho = &p[lay.c_off(c)..lay.c_off(c) + lay.nr];
             for j in 0..lay.nr {
                 for k in 0..lay.ns {
@@ -283,8 +324,13 @@ pub(crate) fn normal_equations(
             if lay.ambient {
                 jac[(d, lay.nr + lay.ns)] = 1.0;
             }
+            let last = idx.len() - 1;
             if lay.interreflection {
-                jac[(d, idx.len() - 1)] = fm.light;
+                jac[(d, last - usize::from(lay.gathered))] = fm.light;
+            }
+            if lay.gathered {
+                jac[(d + 1, lay.nr + lay.ns - 1)] = p[lay.q_off() + c];
+                jac[(d + 1, last)] = gf;
             }
             let gj = gm * &jac;
             let hl = jac.transpose() * gj;

@@ -88,6 +88,10 @@ pub struct PooledSamples {
     /// Per frame, the mean observed luminance (Rec. 709) over all its surface pixels, whatever
     /// their intensity: the light the frame's view holds, which inter-reflection scales with.
     pub frame_light: Vec<f64>,
+    /// Per channel and sample, the light of its frame's lamp once reflected by the wall and
+    /// gathered at the sample's surface point (camera units at the reference gain,
+    /// `shading::indirect`), when the gathered inter-reflection is fitted; set after pooling.
+    pub indirect: Option<[Vec<f32>; 3]>,
 }
 
 impl PooledSamples {
@@ -140,6 +144,8 @@ impl PooledSamples {
             .extend(other.frame_start.iter().skip(1).map(|s| s + offset));
         self.excluded.extend(other.excluded);
         self.frame_light.extend(other.frame_light);
+        // Gathered for whole pools only (after pooling).
+        self.indirect = None;
         Ok(())
     }
 

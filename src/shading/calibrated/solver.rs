@@ -76,6 +76,12 @@ fn fix_gauge(lay: &Layout, p: &mut [f64], reference: usize) {
             p[lay.c_off(c) + j] *= k;
         }
     }
+    // The gathered light was gathered with the old rho: its factor g_f k_c is kept.
+    if lay.gathered {
+        for c in 0..3 {
+            p[lay.q_off() + c] *= k;
+        }
+    }
 }
 
 /// Solve the block of parameters `idx` exactly (the model is linear in each block):
@@ -128,6 +134,11 @@ pub(super) fn solve(
         if lay.interreflection {
             let (h, g, _) = normal_equations(lay, m, &p);
             let idx: Vec<usize> = (0..3).map(|c| lay.k_off() + c).collect();
+            block_step(&mut p, &h, &g, &idx, &lbs(&idx));
+        }
+        if lay.gathered {
+            let (h, g, _) = normal_equations(lay, m, &p);
+            let idx: Vec<usize> = (0..3).map(|c| lay.q_off() + c).collect();
             block_step(&mut p, &h, &g, &idx, &lbs(&idx));
         }
         fix_gauge(lay, &mut p, opts.reference_frame);

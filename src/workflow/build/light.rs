@@ -5,8 +5,14 @@
 //! 3. corrections of the gains against a texture fused with them ([`super::gain_correction`]);
 //! 4. refits of the light's shape with the fused texture's albedo, each followed by one more
 //!    gain correction ([`super::light_refit`], `--light-refits`).
+//!
+//! With `--interreflection gathered` (or `both`) the uniform fit of step 1 lights the wall
+//! once: each sample's gathered light ([`crate::shading::indirect`]) replaces `kappa_c L_f`
+//! (`both`: joins it), the light is fitted again with it, and the later steps gather again
+//! with the light (and, in step 4, the fused texture's albedo) they have by then.
 
 use std::borrow::Cow;
+use std::sync::Arc;
 
 use super::error::BuildError;
 use super::fit_pass::LightSamples;
@@ -16,9 +22,14 @@ use super::light_refit::refit_light_against_texture;
 use super::options::BuildOptions;
 use super::scene::BuildScene;
 use crate::model::manifest::LightFitSettings;
+use crate::shading::calibrated::PooledSamples;
 use crate::shading::calibrated::{
     density_weights_3d, fit_calibrated, refit_with_chroma_albedo, AutoExposure, CalibratedModel,
     CalibratedOptions,
+};
+use crate::shading::indirect::{
+    gather_frames, sample_fields, GatheredInterreflection, IndirectField, InterreflectionMode,
+    SurfaceAlbedo, UniformAlbedo,
 };
 use crate::shading::{ShadingKind, WeightOptions};
 use crate::texture::coarse::CoarseTexels;
@@ -50,10 +61,11 @@ pub fn calibrated_light(
     // The reference gain (g = 1, the exposure new views are rendered at): the middle frame
     // unless set, because a frame mid-video shares the most surface with the others (the
     // first frame sees the cut top of the trachea, which no other frame sees).
-    let cal_opts = CalibratedOptions {
+    let mut cal_opts = CalibratedOptions {
         reference_frame: opts.calibrated_reference.unwrap_or(n / 2).min(n - 1),
         ..opts.calibrated.clone()
     };
+    let mut samples = samples;
     let mut model = match fit_calibrated(&samples.pooled, &density, &cal_opts) {
         Ok(fit) => fit.model,
         Err(e) if opts.shading == Some(ShadingKind::Calibrated) => {
@@ -66,15 +78,38 @@ pub fn calibrated_light(
             return Ok(None);
         }
     };
+    let gathered = opts.interreflection != InterreflectionMode::Uniform;
+    if gathered {
+        // The uniform fit's light, once reflected by a uniform wall, is each sample's first
+        // gathered light; the fit then takes k_c in place of kappa_c (beside it: `both`).
+        cal_opts.gathered = true;
+        cal_opts.interreflection &= opts.interreflection == InterreflectionMode::Both;
+        let settings = gather_settings(opts);
+        let fields = gather_all(scene, &model, &UniformAlbedo, &settings);
+        set_sample_light(scene, &mut samples.pooled, &fields);
+        model = fit_calibrated(&samples.pooled, &density, &cal_opts)?.model;
+        model.gathered = Some(GatheredInterreflection {
+            k: model.gathered.map_or([0.0; 3], |g| g.k),
+            ..settings
+        });
+    }
     for _ in 0..opts.chroma_refits {
         refit_with_chroma_albedo(&mut model, &samples.pooled, &density, &cal_opts)?;
+    }
+    if gathered {
+        model.frame_indirect = Some(gather_all(
+            scene,
+            &model,
+            &UniformAlbedo,
+            &gather_settings(opts),
+        ));
     }
     let consensus = Consensus::coarse(scene, opts, opts.consensus_texel_factor)?;
     for _ in 0..opts.refine_gains {
         correct_gains(&consensus, &mut model)?;
     }
     for _ in 0..opts.refine_light {
-        refit_light_against_texture(&consensus, &mut model, &samples, &density, &cal_opts)?;
+        refit_light_against_texture(&consensus, &mut model, &mut samples, &density, &cal_opts)?;
         correct_gains(&consensus, &mut model)?;
     }
     // The scope's auto-exposure, from the finished gains (used by new views that ask for it).
@@ -85,12 +120,46 @@ pub fn calibrated_light(
         robust: cal_opts.robust.to_string(),
         ambient_per_frame: cal_opts.ambient,
         interreflection: cal_opts.interreflection,
+        interreflection_mode: opts.interreflection,
         reference_frame: model.reference_frame,
         gain_corrections: opts.refine_gains,
         light_refits: opts.refine_light,
         chroma_refits: opts.chroma_refits,
     };
     Ok(Some(CalibratedLight { model, settings }))
+}
+
+/// The gather of `--interreflection gathered|both` as the build options set it.
+fn gather_settings(opts: &BuildOptions) -> GatheredInterreflection {
+    GatheredInterreflection {
+        k: [0.0; 3],
+        nodes_across: opts.gather_nodes,
+        rays: opts.gather_rays,
+        visibility: opts.gather_visibility,
+    }
+}
+
+/// The gathered light of every frame at the working resolution, lit by `model`.
+pub fn gather_all(
+    scene: &BuildScene,
+    model: &CalibratedModel,
+    albedo: &dyn SurfaceAlbedo,
+    settings: &GatheredInterreflection,
+) -> Arc<Vec<IndirectField>> {
+    gather_frames(
+        &scene.scene,
+        &scene.camera,
+        &scene.poses,
+        model,
+        albedo,
+        settings,
+    )
+}
+
+/// Each pooled sample's gathered light from its frame's field.
+pub fn set_sample_light(scene: &BuildScene, pooled: &mut PooledSamples, fields: &[IndirectField]) {
+    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    pooled.indirect = Some(sample_fields(pooled, fields, w, h));
 }
 
 /// The reference texture the light's refinements compare against: every frame de-lit with the

@@ -15,13 +15,14 @@
 //! truth views 31.99 -> 32.54 dB; seeds 2 and 3 alike (BENCHMARKS.md).
 
 use super::fit_pass::LightSamples;
-use super::light::Consensus;
+use super::light::{gather_all, set_sample_light, Consensus};
 use crate::image::Frame;
 use crate::raycast::GBuffer;
 use crate::render::{MipOptions, MipTexture};
 use crate::shading::calibrated::{
     fit_calibrated_with_albedo, CalibratedModel, CalibratedOptions, PooledSamples,
 };
+use crate::shading::indirect::TextureAlbedo;
 use crate::Result;
 
 /// One refit of `model`'s shape (rho, s, kappa) with each pooled sample's albedo taken from
@@ -29,7 +30,7 @@ use crate::Result;
 pub fn refit_light_against_texture(
     consensus: &Consensus,
     model: &mut CalibratedModel,
-    samples: &LightSamples,
+    samples: &mut LightSamples,
     density: &[f32],
     opts: &CalibratedOptions,
 ) -> Result<()> {
@@ -43,7 +44,16 @@ pub fn refit_light_against_texture(
     let texel_mm = scene.atlas.texel_mm;
     let texture = MipTexture::new(&image, None, texel_mm, &MipOptions::default())?;
     let albedo = sample_albedo(&texture, &samples.uv);
-    refit_light_with_albedo(model, &samples.pooled, density, &albedo, opts)
+    let Some(settings) = model.gathered.filter(|_| opts.gathered) else {
+        return refit_light_with_albedo(model, &samples.pooled, density, &albedo, opts);
+    };
+    // The gathered light with the texture's albedo, before and after the refit of the light.
+    let wall = TextureAlbedo::new(&texture, &scene.tri_uv);
+    let fields = gather_all(scene, model, &wall, &settings);
+    set_sample_light(scene, &mut samples.pooled, &fields);
+    refit_light_with_albedo(model, &samples.pooled, density, &albedo, opts)?;
+    model.frame_indirect = Some(gather_all(scene, model, &wall, &settings));
+    Ok(())
 }
 
 /// The texture coordinates of the surface points seen by the pixels `pixels` of a frame

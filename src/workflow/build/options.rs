@@ -3,6 +3,7 @@
 
 use crate::selection::SelectionOptions;
 use crate::shading::calibrated::{CalibratedOptions, PoolOptions};
+use crate::shading::indirect::InterreflectionMode;
 use crate::shading::paper::FitOptions;
 use crate::shading::{SampleOptions, ShadingKind};
 use crate::texture::atlas::AtlasOptions;
@@ -42,6 +43,14 @@ pub struct BuildOptions {
     /// gains with each pixel's albedo predicted from its colour
     /// (`shading::chroma_albedo`; 0 keeps the uniform albedo).
     pub chroma_refits: usize,
+    /// How the calibrated light models inter-reflection (`--interreflection`).
+    pub interreflection: InterreflectionMode,
+    /// Grid nodes across each frame the gathered inter-reflection is gathered at.
+    pub gather_nodes: usize,
+    /// Hemisphere rays per node of the gathered inter-reflection.
+    pub gather_rays: usize,
+    /// Test each bounce point's visibility from the light (one shadow ray per ray).
+    pub gather_visibility: bool,
     /// Rounds of correcting the calibrated light's gains against a texture fused with them.
     pub refine_gains: usize,
     /// The textures those corrections and the light's refits compare against are fused on one
@@ -115,6 +124,10 @@ impl Default for BuildOptions {
             max_pooled_samples: 400_000,
             chroma_refits: 2,
             refine_gains: 2,
+            interreflection: InterreflectionMode::Uniform,
+            gather_nodes: 40,
+            gather_rays: 36,
+            gather_visibility: false,
             // Demo (80 frames, 1.6M pooled samples): k = 1, 2, 3 -> light stage 70, 44, 33 s
             // (loaded machine), new views 33.17, 33.11, 33.02 dB, held-out 33.76, 33.74, 33.74.
             consensus_texel_factor: 2,

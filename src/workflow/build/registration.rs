@@ -347,6 +347,8 @@ pub(super) fn round_light(
     let light_opts = BuildOptions {
         refine_gains: opts.registration_light_refinements,
         refine_light: 0,
+        // The photometric registration predicts with the uniform inter-reflection.
+        interreflection: crate::shading::indirect::InterreflectionMode::Uniform,
         ..opts.clone()
     };
     let light = calibrated_light(scene, samples, &light_opts, &mut round_warnings)?;
