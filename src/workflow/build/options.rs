@@ -7,6 +7,7 @@ use crate::shading::paper::FitOptions;
 use crate::shading::{SampleOptions, ShadingKind};
 use crate::texture::atlas::AtlasOptions;
 use crate::texture::fusion::{FusionMethod, FusionOptions, DEFAULT_WEIGHT_EXPONENT};
+use crate::texture::synthesis::SynthesisOptions;
 use crate::workflow::segment::SegmentCommandOptions;
 
 /// Most frames a build uses by default (`--max-frames`).
@@ -25,6 +26,8 @@ pub struct BuildOptions {
     pub fit: FitOptions,
     /// De-lighting and fusion.
     pub fusion: FusionOptions,
+    /// What the texture holds where no frame saw the wall (`--unseen`).
+    pub unseen: SynthesisOptions,
     /// Which shading model de-lights the texture and shades new views (`None`: the one that
     /// predicts held-out frames better, decided by cross-validation).
     pub shading: Option<ShadingKind>,
@@ -105,6 +108,7 @@ impl Default for BuildOptions {
                 },
                 ..Default::default()
             },
+            unseen: SynthesisOptions::default(),
             shading: None,
             calibrated: CalibratedOptions::default(),
             calibrated_reference: None,
