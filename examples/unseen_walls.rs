@@ -102,18 +102,19 @@ fn main() -> Result<()> {
         ("model (as built)", &model_rgb),
         ("today's fill", &fill),
     ];
-    println!("| unseen walls | mean RGB | lum. std | spectrum log10 RMS vs truth | seam across / within seen | texel rel. RMS |");
+    println!("| unseen walls | mean RGB | lum. std | spectrum log10 RMS vs truth | seam across / within seen / seen near border | texel rel. RMS |");
     println!("|---|---|---|---|---|---|");
     for (name, rgb) in rows {
         let s = region_stats(rgb, w, h, &unseen, window);
         let seam = seam_gradients(rgb, w, &seen, &unseen, &chart);
         println!(
-            "| {name} | {} | {:.4} | {:.3} | {:.4} / {:.4} ({} pairs) | {:.1}% |",
+            "| {name} | {} | {:.4} | {:.3} | {:.4} / {:.4} / {:.4} ({} pairs) | {:.1}% |",
             fmt_rgb(&s),
             s.luminance_std,
             spectrum_distance(&s.spectrum, &t.spectrum),
             seam.across,
             seam.within_seen,
+            seam.within_seen_near,
             seam.border_pairs,
             100.0 * relative_rms(rgb, &truth, &unseen)
         );

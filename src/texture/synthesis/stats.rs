@@ -207,9 +207,17 @@ pub struct SeamStats {
     pub across: f64,
     /// Mean |ΔL| over 4-neighbour pairs of seen texels of the same chart.
     pub within_seen: f64,
+    /// Mean |ΔL| over 4-neighbour pairs of seen texels of the same chart within
+    /// [`NEAR_BORDER_TEXELS`] of a `region` texel (the seen texture right at the border, which
+    /// is seen by fewer frames, more obliquely, than the rest).
+    pub within_seen_near: f64,
     /// Pairs across the border.
     pub border_pairs: usize,
 }
+
+/// Distance (texels, 4-connected through seen texels) within which a seen pair counts as near
+/// the border in [`SeamStats::within_seen_near`].
+pub const NEAR_BORDER_TEXELS: u32 = 3;
 
 /// [`SeamStats`] of the atlas `rgb` (`width` wide): `seen` and `region` (e.g. the synthesised
 /// texels) are atlas-sized masks, `chart_of_texel` the chart per texel (`u32::MAX` for none).
@@ -221,33 +229,68 @@ pub fn seam_gradients(
     chart_of_texel: &[u32],
 ) -> SeamStats {
     let lum = |i: usize| luminance([rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2]]);
-    let (mut across, mut na, mut within, mut nw) = (0.0f64, 0usize, 0.0f64, 0usize);
     let n = seen.len();
+    let pairs = |i: usize| {
+        let right = (i % width + 1 < width).then_some(i + 1);
+        let down = (i + width < n).then_some(i + width);
+        [right, down].into_iter().flatten()
+    };
+    // Distance of the seen texels from the region, up to NEAR_BORDER_TEXELS.
+    let mut dist = vec![u32::MAX; n];
+    let mut front: Vec<usize> = (0..n).filter(|&i| region[i]).collect();
+    for &i in &front {
+        dist[i] = 0;
+    }
+    for d in 1..=NEAR_BORDER_TEXELS {
+        let mut next = Vec::new();
+        for &i in &front {
+            let (x, y) = (i % width, i / width);
+            let around = [
+                (x > 0).then(|| i - 1),
+                (x + 1 < width).then_some(i + 1),
+                (y > 0).then(|| i - width),
+                (i + width < n).then_some(i + width),
+            ];
+            for j in around.into_iter().flatten() {
+                if seen[j] && dist[j] == u32::MAX && chart_of_texel[j] == chart_of_texel[i] {
+                    dist[j] = d;
+                    next.push(j);
+                }
+            }
+        }
+        front = next;
+    }
+    let (mut across, mut within, mut near) = ((0.0f64, 0usize), (0.0f64, 0usize), (0.0f64, 0usize));
+    let add = |acc: &mut (f64, usize), g: f64| {
+        acc.0 += g;
+        acc.1 += 1;
+    };
     for i in 0..n {
         let c = chart_of_texel[i];
         if c == u32::MAX {
             continue;
         }
-        let right = (i % width + 1 < width).then_some(i + 1);
-        let down = (i + width < n).then_some(i + width);
-        for j in [right, down].into_iter().flatten() {
+        for j in pairs(i) {
             if chart_of_texel[j] != c {
                 continue;
             }
             let g = (lum(i) - lum(j)).abs();
             if seen[i] && seen[j] {
-                within += g;
-                nw += 1;
+                add(&mut within, g);
+                if dist[i].min(dist[j]) <= NEAR_BORDER_TEXELS {
+                    add(&mut near, g);
+                }
             } else if (seen[i] && region[j]) || (region[i] && seen[j]) {
-                across += g;
-                na += 1;
+                add(&mut across, g);
             }
         }
     }
+    let mean = |a: (f64, usize)| a.0 / a.1.max(1) as f64;
     SeamStats {
-        across: across / na.max(1) as f64,
-        within_seen: within / nw.max(1) as f64,
-        border_pairs: na,
+        across: mean(across),
+        within_seen: mean(within),
+        within_seen_near: mean(near),
+        border_pairs: across.1,
     }
 }
 
@@ -296,5 +339,6 @@ mod tests {
         let s = seam_gradients(&rgb, w, &seen, &region, &vec![0; w * h]);
         assert_eq!(s.border_pairs, h);
         assert!((s.across - 0.4).abs() < 1e-6 && s.within_seen.abs() < 1e-12);
+        assert!(s.within_seen_near.abs() < 1e-12);
     }
 }
