@@ -39,7 +39,7 @@ fn main() -> Result<()> {
     let (w, h) = (albedo.width as usize, albedo.height as usize);
     if (coverage.width, coverage.height) != (albedo.width, albedo.height) {
         return Err(Error::invalid(
-            &model_dir.join("coverage.png"),
+            model_dir.join("coverage.png"),
             "not the size of albedo.png",
         ));
     }

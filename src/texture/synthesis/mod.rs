@@ -92,7 +92,7 @@ impl Default for SynthesisOptions {
             random_candidates: 400,
             near_candidates: 32,
             tolerance: 0.1,
-            seed: 0x5EED_0F_A11,
+            seed: 0x0005_EED0_FA11,
         }
     }
 }
