@@ -37,6 +37,19 @@ fn phantom_then_build_writes_the_model_folder() {
     let covered = m["counts"]["covered_texels"].as_u64().unwrap();
     let chart = m["counts"]["chart_texels"].as_u64().unwrap();
     assert!(covered > 1000 && covered <= chart, "{covered} of {chart}");
+    // Walls the 8 frames never saw are synthesised by default; the shares add up to the surface.
+    let u = &m["unseen_walls"];
+    assert_eq!(u["mode"], "synthesise");
+    let share = |k: &str| u[k].as_f64().unwrap();
+    assert!((share("observed_share") - covered as f64 / chart as f64).abs() < 1e-9);
+    assert!(
+        share("synthesised_share") > 0.05 && share("filled_share") < 0.01,
+        "{u}"
+    );
+    assert!(
+        (share("observed_share") + share("synthesised_share") + share("filled_share") - 1.0).abs()
+            < 1e-9
+    );
     // Psi explains most of the shading of physically based frames that are not Psi: per-frame
     // R² 0.7–0.85 in red, lower in green and blue whose dark vessels are texture, not shading.
     let r2 = m["mean_r2"].as_f64().unwrap();

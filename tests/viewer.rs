@@ -173,6 +173,13 @@ fn the_viewer_draws_what_render_draws_and_navigates_inside_the_lumen() {
     let nav = drive(&["navigate", "viewer"], dir);
     eprintln!("navigation: {nav}");
     let f = |k: &str| nav[k].as_f64().unwrap();
+    // 24 frames saw part of the wall: marking the rest turns the start view bluer (+4.8% blue
+    // over red when written: most of what it sees was seen), and back.
+    let u = &nav["unseen"];
+    let g = |k: &str| u[k].as_f64().unwrap();
+    assert_eq!(u["enabled"], true, "{u}");
+    assert!(g("on") > 1.02 * g("off"), "{u}");
+    assert!((g("offAgain") - g("off")).abs() < 1e-9, "{u}");
     // W held 0.5 s at 5 mm/s: 2.5 mm straight ahead (keys are timed by their events; the
     // driver's own latency may add a little).
     assert!(

@@ -110,12 +110,35 @@ pub struct ModelManifest {
     /// without a selection, `--max-frames 0`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub frame_selection: Option<FrameSelection>,
+    /// What the texture holds where no frame saw the wall (absent in models written before
+    /// it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unseen_walls: Option<UnseenWalls>,
     /// What the build could not do as asked (e.g. a failed calibrated fit).
     pub warnings: Vec<String>,
     /// Mean L2 stretch of the atlas.
     pub atlas_mean_l2_stretch: f64,
     /// Atlas utilisation (covered / all texels).
     pub atlas_utilisation: f64,
+}
+
+/// The share of the surface the video observed and what the texture holds elsewhere
+/// (coverage.png marks the observed texels; shares are of the chart texels, each the same
+/// area on the surface).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct UnseenWalls {
+    /// `fill` or `synthesise` (`build --unseen`).
+    pub mode: crate::texture::synthesis::UnseenMode,
+    /// Share of the surface seen by a frame.
+    pub observed_share: f64,
+    /// Share given synthesised mucosa.
+    pub synthesised_share: f64,
+    /// Share filled from neighbouring seen colours.
+    pub filled_share: f64,
+    /// Edge of the synthesis patches on the surface (mm; 0 when nothing was synthesised).
+    pub patch_mm: f64,
+    /// Seconds the completion took (albedo and the paper's texture).
+    pub seconds: f64,
 }
 
 /// The settings the calibrated light was fitted with (`build` options), for reproducing a model.

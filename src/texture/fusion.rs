@@ -20,6 +20,7 @@ use rayon::prelude::*;
 use super::atlas::fill_uncovered;
 use super::blur::{blur_rect, gaussian_kernel};
 use super::delight::{max_ray_angle, DelightOptions, FrameCtx, Observation};
+use super::synthesis::{complete_unseen, SynthesisOptions, SynthesisStats};
 use super::texels::{TexelRect, TexelSet, BLOCK};
 use crate::camera::Camera;
 use crate::image::ImageError;
@@ -174,6 +175,21 @@ impl FusedTexture {
             &texels.chart_map(),
         )?;
         Ok(rgb)
+    }
+
+    /// The atlas with uncovered chart texels synthesised from the covered ones (or filled, per
+    /// `opts.mode`) and the gutter filled ([`complete_unseen`]); `texel_mm` is the atlas's
+    /// texel edge (mm). Also returns the counts and which texels were synthesised.
+    pub fn completed(
+        &self,
+        texels: &TexelSet,
+        texel_mm: f64,
+        opts: &SynthesisOptions,
+    ) -> Result<(Vec<f32>, SynthesisStats, Vec<bool>)> {
+        let mut rgb = self.rgb.clone();
+        let (stats, synthesised) =
+            complete_unseen(&mut rgb, &self.covered, texels, texel_mm, opts)?;
+        Ok((rgb, stats, synthesised))
     }
 }
 

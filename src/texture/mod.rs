@@ -4,7 +4,8 @@
 //!
 //! ```text
 //! Atlas ─ rasterize_texels ─► TexelGeometry ─ TexelSet::new ─► TexelSet
-//! TexelSet + frames (Frame, pose, PsiModel, depth) ─ fuse ─► FusedTexture ─ filled ─► albedo.png, airway.glb
+//! TexelSet + frames (Frame, pose, PsiModel, depth) ─ fuse ─► FusedTexture ─ completed ─► albedo.png, airway.glb
+//!                                                  (unseen texels synthesised: synthesis)
 //! ```
 
 pub mod atlas;
@@ -13,6 +14,7 @@ pub mod coarse;
 pub mod delight;
 pub mod fusion;
 pub mod output;
+pub mod synthesis;
 pub mod texels;
 
 pub use delight::{delight_frame, DelightOptions, DelitFrame, Observation};

@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 
 use crate::io::glb_import::read_glb;
 use crate::io::output_dir::OutputDir;
-use crate::io::png::decode_png_bytes;
+use crate::io::png::{decode_png_bytes, read_png};
 use crate::model::Model;
 use crate::render::MipOptions;
 use crate::shading::paper::PsiLookup;
@@ -132,6 +132,20 @@ pub fn write_viewer(model_dir: &Path, out: &Path, opts: &ViewerOptions) -> Resul
         .texture_png
         .ok_or_else(|| Error::invalid(&gpath, "no embedded base colour texture"))?;
     let texture = decode_png_bytes(&png, &gpath)?;
+    // Which walls a frame saw (absent in hand-made model folders: then nothing is marked).
+    let cov_path = model_dir.join("coverage.png");
+    let coverage = match cov_path.is_file() {
+        true => Some(read_png(&cov_path)?),
+        false => None,
+    };
+    if let Some(c) = &coverage {
+        if (c.width, c.height) != (texture.width, texture.height) {
+            return Err(Error::invalid(
+                &cov_path,
+                "not the size of the model's texture",
+            ));
+        }
+    }
     let positions: Vec<[f32; 3]> = glb.mesh.positions.iter().map(|p| [p.x, p.y, p.z]).collect();
     let normals: Vec<[f32; 3]> = map
         .iter()
@@ -170,6 +184,7 @@ pub fn write_viewer(model_dir: &Path, out: &Path, opts: &ViewerOptions) -> Resul
         indices: &glb.mesh.triangles,
         texture: &texture,
         field: &field,
+        coverage: coverage.as_ref(),
     });
     let m = &model.manifest;
     let meta = Meta {

@@ -7,7 +7,9 @@
 //! `positions` f32 x 3 per vertex (world mm), `normals` f32 x 3 (unit, the smooth normals the
 //! ray caster interpolates), `uvs` f32 x 2 (atlas, v down), `indices` u32 x 3 per triangle,
 //! `texture` u8 RGB sRGB codes row by row, each byte stored as its difference to the texel on
-//! its left (mod 256; compresses about twice as well), `field` u8 distances.
+//! its left (mod 256; compresses about twice as well), `field` u8 distances, and when the
+//! model has coverage.png, `coverage` u8 per atlas texel (255: a frame saw it, 0: synthesised
+//! or filled; the page can mark those walls).
 
 use std::io::Write;
 
@@ -26,7 +28,7 @@ use crate::Result;
 /// Where one array lies in the decompressed binary block.
 #[derive(Clone, Debug, Serialize)]
 pub struct Section {
-    /// "positions", "normals", "uvs", "indices", "texture" or "field".
+    /// "positions", "normals", "uvs", "indices", "texture", "field" or "coverage".
     pub name: &'static str,
     /// Byte offset.
     pub offset: usize,
@@ -237,6 +239,8 @@ pub struct Arrays<'a> {
     pub texture: &'a Frame,
     /// The inside-distance field.
     pub field: &'a LumenField,
+    /// coverage.png (atlas-sized; white where a frame saw the texel), when the model has it.
+    pub coverage: Option<&'a Frame>,
 }
 
 /// Pack the arrays into one block; returns the block and where each array lies.
@@ -274,6 +278,9 @@ pub fn pack(arrays: &Arrays) -> (Vec<u8>, Vec<Section>) {
     push("indices", &mut idx.into_iter());
     push("texture", &mut texture_codes(arrays.texture).into_iter());
     push("field", &mut arrays.field.data.iter().copied());
+    if let Some(c) = arrays.coverage {
+        push("coverage", &mut coverage_codes(c).into_iter());
+    }
     (bin, sections)
 }
 
@@ -289,6 +296,14 @@ fn texture_codes(t: &Frame) -> Vec<u8> {
         }
     }
     out
+}
+
+/// 255 where coverage.png says a frame saw the texel, 0 elsewhere, row by row.
+fn coverage_codes(c: &Frame) -> Vec<u8> {
+    c.rgb
+        .chunks_exact(3)
+        .map(|p| if p[0] > 0.5 { 255 } else { 0 })
+        .collect()
 }
 
 /// `model-data.js`: the description and the zlib-compressed, base64-encoded block.
@@ -342,5 +357,13 @@ mod tests {
         }
         assert_eq!(back, codes);
         assert_ne!(d, codes);
+    }
+
+    #[test]
+    fn coverage_is_one_byte_per_texel() {
+        let mut f = Frame::new(2, 2);
+        f.rgb[3..6].copy_from_slice(&[1.0; 3]);
+        f.rgb[9..12].copy_from_slice(&[0.4; 3]);
+        assert_eq!(coverage_codes(&f), vec![0, 255, 0, 0]);
     }
 }

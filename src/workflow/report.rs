@@ -382,6 +382,20 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
         m.counts.chart_texels,
         100.0 * m.counts.covered_texels as f64 / m.counts.chart_texels.max(1) as f64
     );
+    if let Some(u) = &m.unseen_walls {
+        // coverage.png marks the seen texels; say what the others hold.
+        let _ = write!(
+            html,
+            "<p>Walls no frame saw ({:.0}% of the surface): {:.0}% synthesised from the seen \
+             mucosa (patch quilting, patches of {:.1} mm), {:.0}% filled from neighbouring \
+             colours (<code>--unseen synthesise|fill</code>); <code>coverage.png</code> marks \
+             the observed texels.</p>",
+            100.0 * (1.0 - u.observed_share),
+            100.0 * u.synthesised_share,
+            u.patch_mm,
+            100.0 * u.filled_share
+        );
+    }
     // The viewer sits beside the model folder (`bronchosim view`'s default, and the demo's).
     html.push_str(
         "<p><b>Fly through this model</b> in a browser, lit as the bronchoscope lights it: \

@@ -117,6 +117,26 @@ async function navigate(viewer) {
     const r = { loadMs };
     const s0 = await state(page);
     r.start = s0;
+    // "mark unseen walls": blue over red of the drawn image, off, on, off again.
+    r.unseen = await page.evaluate(() => {
+      const app = window.bronchosim.app, c = document.getElementById("view"), box = document.getElementById("unseen");
+      const blueOverRed = () => {
+        app.draw();
+        const t = document.createElement("canvas");
+        t.width = c.width; t.height = c.height;
+        const g = t.getContext("2d");
+        g.drawImage(c, 0, 0);
+        const d = g.getImageData(0, 0, t.width, t.height).data;
+        let red = 0, blue = 0;
+        for (let i = 0; i < d.length; i += 4) { red += d[i]; blue += d[i + 2]; }
+        return blue / Math.max(red, 1);
+      };
+      const off = blueOverRed();
+      box.click();
+      const on = blueOverRed();
+      box.click();
+      return { enabled: !box.disabled, off, on, offAgain: blueOverRed() };
+    });
     // Keys: hold W for 0.5 s at the default speed: the camera moves forward.
     await page.focus("#view");
     await hold(page, "w", 500);

@@ -154,6 +154,11 @@ pub struct BuildArgs {
     /// attempt; 2: inverse-variance weights for intensity errors of constant size).
     #[arg(long, default_value_t = bronchosim::texture::fusion::DEFAULT_WEIGHT_EXPONENT)]
     pub fusion_weight_exponent: f32,
+    /// Texels no frame saw: mucosa synthesised from the seen texture (patch quilting, seamless
+    /// at the border) or the chart's nearest seen colours pushed in (a flat fill).
+    /// coverage.png keeps marking the seen texels either way.
+    #[arg(long, value_enum, default_value_t = build_defaults().unseen.mode)]
+    pub unseen: bronchosim::texture::synthesis::UnseenMode,
     /// Shading model of the texture and of new views: paper (per-viewpoint Psi),
     /// calibrated (one light for the whole video) or auto (the one that predicts held-out
     /// frames better).

@@ -93,6 +93,7 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
     opts.gather_rays = a.gather_rays;
     opts.gather_visibility = a.gather_visibility;
     opts.fusion.method = FusionMethod::of_kind(a.fusion, a.fusion_weight_exponent);
+    opts.unseen.mode = a.unseen;
     let m = build_model(&a.case, &a.out, &opts)
         .with_context(|| format!("build {}", a.case.display()))?;
     for w in &m.warnings {

@@ -36,6 +36,8 @@ BS.decode = (function () {
       indices: new Uint32Array(buf, sec.indices.offset, sec.indices.length / 4),
       textureCodes: new Uint8Array(buf, sec.texture.offset, sec.texture.length),
       field: new Uint8Array(buf, sec.field.offset, sec.field.length),
+      // 255 where a frame saw the texel (absent: nothing to mark).
+      coverage: sec.coverage ? new Uint8Array(buf, sec.coverage.offset, sec.coverage.length) : null,
     };
   }
 

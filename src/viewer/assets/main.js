@@ -34,6 +34,7 @@ window.BS = window.BS || {};
       this.ev = 0;
       this.autoExposure = false;
       this.albedoOnly = false;
+      this.markUnseen = false;
       this.dirty = true;
       this.frameTimes = [];
       this.framesDrawn = 0;
@@ -71,6 +72,7 @@ window.BS = window.BS || {};
         gain: Math.pow(2, this.ev),
         autoExposure: this.autoExposure,
         albedoOnly: this.albedoOnly,
+        markUnseen: this.markUnseen,
       });
       this.framesDrawn++;
       this.dirty = false;

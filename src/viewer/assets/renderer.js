@@ -38,6 +38,20 @@ BS.Renderer = (function () {
     return tex;
   }
 
+  // One byte per texel (the coverage map), sampled bilinearly so marked walls have soft edges.
+  function byteTexture(gl, w, h, data) {
+    const tex = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, tex);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+    gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.R8, w, h, 0, gl.RED, gl.UNSIGNED_BYTE, data);
+    gl.pixelStorei(gl.UNPACK_ALIGNMENT, 4);
+    return tex;
+  }
+
   // The paper's viewpoint weights for a new camera, as src/shading/paper/viewpoints.rs blends
   // them (k = 1: the nearest camera centre, ties by viewing direction).
   function psiWeights(vps, pose, k, directionMm) {
@@ -83,6 +97,7 @@ BS.Renderer = (function () {
       this.composite = compile(gl, BS.shaders.quadVS, BS.shaders.compositeFS);
       this.uploadMesh();
       this.uploadTexture();
+      this.texCoverage = model.coverage ? byteTexture(gl, this.meta.texture.width, this.meta.texture.height, model.coverage) : null;
       const sh = this.meta.shading;
       if (sh.kind === "paper") {
         this.viewpoints = sh.viewpoints.map((p) => {
@@ -244,6 +259,10 @@ BS.Renderer = (function () {
       gl.activeTexture(gl.TEXTURE1); gl.bindTexture(gl.TEXTURE_2D, this.texMips);
       gl.uniform1i(s.loc.uTex0, 0);
       gl.uniform1i(s.loc.uTexMips, 1);
+      gl.activeTexture(gl.TEXTURE2); gl.bindTexture(gl.TEXTURE_2D, this.texCoverage);
+      gl.uniform1i(s.loc.uCoverage, 2);
+      gl.uniform1i(s.loc.uMarkUnseen, view.markUnseen && this.texCoverage ? 1 : 0);
+      gl.activeTexture(gl.TEXTURE0);
       gl.uniform2iv(s.loc.uLevelSize, new Int32Array(this.levelSize.slice(0, 16)));
       gl.uniform2iv(s.loc.uLevelOffset, new Int32Array(this.levelOffset.slice(0, 16)));
       gl.uniform1i(s.loc.uLevels, this.levels);

@@ -72,6 +72,8 @@ uniform vec2 uAtlasSize;
 uniform float uTexelMm;
 uniform int uKind;             // 0 calibrated light, 1 the paper's Psi
 uniform int uAlbedoOnly;
+uniform sampler2D uCoverage;   // 1 where a frame saw the texel
+uniform int uMarkUnseen;       // tint the walls no frame saw (synthesised or filled)
 uniform float uCosEdge;
 uniform vec3 uAmbient;
 uniform int uPsiCount;         // blended viewpoints (<= 4)
@@ -130,6 +132,11 @@ void main() {
   float fp = z * pixelAngle / max(gamma, 1e-3);
   float lod = log2(max(fp / uTexelMm, 1.0));
   vec3 a = albedo(vUv, lod);
+  if (uMarkUnseen == 1) {
+    // Blue with the texture's own luminance, so the made-up pattern stays visible.
+    float l = dot(a, vec3(0.2126, 0.7152, 0.0722));
+    a = mix(a, l * vec3(0.5, 0.9, 2.4), 0.75 * (1.0 - texture(uCoverage, vUv).r));
+  }
   if (uAlbedoOnly == 1) { outColor = vec4(a, 1.0); return; }
   vec3 scale = vec3(0.0);
   vec3 offset = vec3(0.0);

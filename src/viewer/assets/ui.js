@@ -33,6 +33,8 @@ BS.UI = (function () {
       auto.checked = app.autoExposure;
       auto.addEventListener("change", (e) => { app.autoExposure = e.target.checked; app.invalidate(); });
       $("albedo").addEventListener("change", (e) => { app.albedoOnly = e.target.checked; app.invalidate(); });
+      $("unseen").disabled = !app.renderer.texCoverage;
+      $("unseen").addEventListener("change", (e) => { app.markUnseen = e.target.checked; app.invalidate(); });
       $("shot").addEventListener("click", () => app.screenshot());
       $("copy-pose").addEventListener("click", () => this.copy($("pose").value, "copy-pose"));
       $("copy-link").addEventListener("click", () => this.copy(location.href.split("#")[0] + M.formatHash(nav.pose, app.camera()), "copy-link"));

@@ -8,6 +8,7 @@ use super::options::BuildOptions;
 use super::scene::BuildScene;
 use crate::shading::{FittedShading, ShadingKind};
 use crate::texture::fusion::fuse;
+use crate::texture::synthesis::SynthesisStats;
 use crate::Result;
 
 /// One fused albedo atlas.
@@ -16,6 +17,12 @@ pub struct FusedAlbedo {
     pub rgb: Vec<f32>,
     /// Texels seen by at least one frame.
     pub covered: Vec<bool>,
+    /// Texels given synthesised mucosa (none seen them; `--unseen synthesise`).
+    pub synthesised: Vec<bool>,
+    /// Counts of the completion of the unseen texels.
+    pub synthesis: SynthesisStats,
+    /// Seconds spent completing the unseen texels.
+    pub synthesis_seconds: f64,
     /// The per-channel factors of the colour balance.
     pub colour_balance: [f32; 3],
 }
@@ -87,11 +94,17 @@ fn fuse_albedo(
     );
     let fused = fuse(&scene.texels, &mut stream, &opts.fusion)?;
     stream.progress.finish();
-    let mut rgb = fused.filled(&scene.texels)?;
+    let start = std::time::Instant::now();
+    let (mut rgb, synthesis, synthesised) =
+        fused.completed(&scene.texels, scene.atlas.texel_mm, &opts.unseen)?;
+    let synthesis_seconds = start.elapsed().as_secs_f64();
     let colour_balance = colour_balance(&mut rgb, &fused.covered, pixel_sum);
     Ok(FusedAlbedo {
         rgb,
         covered: fused.covered,
+        synthesised,
+        synthesis,
+        synthesis_seconds,
         colour_balance,
     })
 }

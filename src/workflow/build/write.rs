@@ -15,7 +15,7 @@ use crate::io::output_dir::OutputDir;
 use crate::io::poses::write_poses_annotated;
 use crate::model::manifest::{
     relative_path, BuildTimings, CrossValidation, ExtraTexture, LightFitSettings, ModelCounts,
-    ModelInputs, ModelManifest, MODEL_FORMAT_VERSION, PAPER_TEXTURE_FILE,
+    ModelInputs, ModelManifest, UnseenWalls, MODEL_FORMAT_VERSION, PAPER_TEXTURE_FILE,
 };
 use crate::model::registration::PoseRegistration;
 use crate::model::selection::FrameSelection;
@@ -143,6 +143,7 @@ fn write_model_files(out_dir: &OutputDir, built: &BuiltModel) -> Result<ModelMan
         light_fit: built.light_fit.clone(),
         registration: built.registration.clone(),
         frame_selection: built.selection.clone(),
+        unseen_walls: Some(unseen_walls(built, atlas.texel_mm)),
         warnings: built.warnings.clone(),
         atlas_mean_l2_stretch: atlas.stats.mean_l2_stretch,
         atlas_utilisation: atlas.stats.utilisation,
@@ -190,4 +191,24 @@ fn write_model_report(
             shading: built.shading,
         },
     )
+}
+
+/// model.json's record of the observed and the made-up surface.
+fn unseen_walls(built: &BuiltModel, texel_mm: f64) -> UnseenWalls {
+    let albedo = &built.textures.albedo;
+    let st = &albedo.synthesis;
+    let all = (st.seen_texels + st.synthesised_texels + st.filled_texels).max(1) as f64;
+    let paper_seconds = built
+        .textures
+        .paper
+        .as_ref()
+        .map_or(0.0, |p| p.synthesis_seconds);
+    UnseenWalls {
+        mode: st.mode,
+        observed_share: st.seen_texels as f64 / all,
+        synthesised_share: st.synthesised_texels as f64 / all,
+        filled_share: st.filled_texels as f64 / all,
+        patch_mm: st.patch_texels as f64 * texel_mm,
+        seconds: albedo.synthesis_seconds + paper_seconds,
+    }
 }
