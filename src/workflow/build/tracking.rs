@@ -48,10 +48,12 @@ fn on_frames<T>(
     f: impl FnOnce(&mut BuildScene) -> Result<T>,
 ) -> Result<T> {
     let (case_poses, poses) = (scene.case.poses.clone(), scene.poses.clone());
+    let numbers = scene.frame_numbers.clone();
     scene.keep_frames(keep, opts.depth_cache_bytes);
     let out = f(scene);
     scene.case.poses = case_poses;
     scene.poses = poses;
+    scene.frame_numbers = numbers;
     scene.cache =
         super::frames::DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
     out
