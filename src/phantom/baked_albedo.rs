@@ -34,20 +34,20 @@ pub enum AlbedoSampling {
 }
 
 /// The albedo the phantom renders with: procedural, or baked on the truth mesh.
-pub enum SurfaceAlbedo {
+pub enum PhantomAlbedo {
     /// [`MucosaAlbedo::eval`] at the hit point.
     Procedural(MucosaAlbedo),
     /// The lattice lookup of [`BakedAlbedo`].
     Baked(BakedAlbedo),
 }
 
-impl SurfaceAlbedo {
+impl PhantomAlbedo {
     /// The albedo `sampling` asks for, of `albedo` on the mesh of `scene`.
     pub fn new(albedo: MucosaAlbedo, sampling: AlbedoSampling, scene: &Scene) -> Self {
         match sampling {
-            AlbedoSampling::Procedural => SurfaceAlbedo::Procedural(albedo),
+            AlbedoSampling::Procedural => PhantomAlbedo::Procedural(albedo),
             AlbedoSampling::Baked { spacing_mm } => {
-                SurfaceAlbedo::Baked(BakedAlbedo::bake(&albedo, scene, spacing_mm))
+                PhantomAlbedo::Baked(BakedAlbedo::bake(&albedo, scene, spacing_mm))
             }
         }
     }
@@ -57,20 +57,20 @@ impl SurfaceAlbedo {
     #[inline]
     pub fn at(&self, tri: u32, bary: [f32; 2], point: [f32; 3]) -> [f32; 3] {
         match self {
-            SurfaceAlbedo::Procedural(a) => a.eval(Point3::new(
+            PhantomAlbedo::Procedural(a) => a.eval(Point3::new(
                 point[0] as f64,
                 point[1] as f64,
                 point[2] as f64,
             )),
-            SurfaceAlbedo::Baked(b) => b.at(tri, bary),
+            PhantomAlbedo::Baked(b) => b.at(tri, bary),
         }
     }
 
     /// Linear RGB albedo at vertex `v` of the mesh, which is at `p` (world mm).
     pub fn at_vertex(&self, v: usize, p: Point3<f64>) -> [f32; 3] {
         match self {
-            SurfaceAlbedo::Procedural(a) => a.eval(p),
-            SurfaceAlbedo::Baked(b) => b.vertex_values[v],
+            PhantomAlbedo::Procedural(a) => a.eval(p),
+            PhantomAlbedo::Baked(b) => b.vertex_values[v],
         }
     }
 }

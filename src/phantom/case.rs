@@ -10,7 +10,7 @@
 //! temporary folder beside `out` and renamed into place at the end.
 
 use super::albedo::MucosaAlbedo;
-use super::baked_albedo::{AlbedoSampling, SurfaceAlbedo};
+use super::baked_albedo::{AlbedoSampling, PhantomAlbedo};
 use super::ct_volume::{make_ct_phantom, CtPhantomOptions};
 use super::from_mask::{ct_from_mask_file, FromMaskOptions};
 use super::mask_path::mask_centreline;
@@ -238,7 +238,7 @@ struct Anatomy {
 struct Stage<'a> {
     opts: &'a PhantomOptions,
     scene: Scene,
-    albedo: SurfaceAlbedo,
+    albedo: PhantomAlbedo,
 }
 
 fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
@@ -265,7 +265,7 @@ fn write_into(dir: &Path, opts: &PhantomOptions) -> Result<PhantomSummary> {
     sm.albedo = Some(sampling);
     let stage = Stage {
         opts,
-        albedo: SurfaceAlbedo::new(phantom_albedo(seed), sampling, &scene),
+        albedo: PhantomAlbedo::new(phantom_albedo(seed), sampling, &scene),
         scene,
     };
     let camera = phantom_camera(opts.width, opts.height);

@@ -10,7 +10,7 @@
 //! sensor: a per-frame auto-gain (mean linear luminance to a target, capped so only a small
 //! percentile of pixels clips), Poisson–Gaussian noise and clipping at 1.0 (saturation).
 
-use super::baked_albedo::SurfaceAlbedo;
+use super::baked_albedo::PhantomAlbedo;
 use crate::camera::Camera;
 use crate::image::Frame;
 use crate::math::Affine;
@@ -188,7 +188,7 @@ pub fn render_radiance(
     scene: &Scene,
     rays: &SubpixelRays,
     camera_to_world: &Affine,
-    albedo: &SurfaceAlbedo,
+    albedo: &PhantomAlbedo,
     light: &LightModel,
 ) -> Radiance {
     let gb = cast_frame_with(scene, &rays.table, camera_to_world);

@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 use crate::image::Frame;
 use crate::io::case::Case;
-use crate::phantom::baked_albedo::{AlbedoSampling, SurfaceAlbedo};
+use crate::phantom::baked_albedo::{AlbedoSampling, PhantomAlbedo};
 use crate::phantom::case::phantom_albedo;
 use crate::phantom::render::LightModel;
 use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
@@ -75,7 +75,7 @@ pub fn spread(v: &[f64]) -> (f64, f64) {
 struct PhantomTruth {
     gains: Vec<f64>,
     light: LightModel,
-    albedo: SurfaceAlbedo,
+    albedo: PhantomAlbedo,
 }
 
 fn read_json(path: &Path) -> Result<serde_json::Value> {
@@ -110,7 +110,7 @@ fn read_truth(truth_dir: &Path, scene: &Scene) -> Result<PhantomTruth> {
     Ok(PhantomTruth {
         gains,
         light,
-        albedo: SurfaceAlbedo::new(phantom_albedo(seed), sampling, scene),
+        albedo: PhantomAlbedo::new(phantom_albedo(seed), sampling, scene),
     })
 }
 

@@ -16,7 +16,7 @@ use crate::io::png::write_png_srgb8;
 use crate::io::poses::{write_poses, FrameRef, PoseEntry};
 use crate::math::{Affine, Point3};
 use crate::mesh::TriMesh;
-use crate::phantom::baked_albedo::SurfaceAlbedo;
+use crate::phantom::baked_albedo::PhantomAlbedo;
 use crate::phantom::render::{expose, render_radiance, LightModel, SensorModel, SubpixelRays};
 use crate::phantom::truth_io::{
     write_albedo_ply, write_gray16_png, write_gray8_png, write_linear16_png,
@@ -147,7 +147,7 @@ fn write_view(
     scene: &Scene,
     pinhole: &Camera,
     rays: &SubpixelRays,
-    albedo: &SurfaceAlbedo,
+    albedo: &PhantomAlbedo,
     opts: &PhantomOptions,
     gain: f64,
 ) -> Result<()> {
