@@ -266,19 +266,10 @@ pub fn refine_video(
     let deltas: Vec<PoseDelta> = res.iter().map(|r| r.correction).collect();
     flag_failures(&mut res, &ok, &deltas, poses, opts);
     let measured: Vec<Affine> = res.iter().map(|r| r.pose).collect();
-    let mut noise = [0.0; 6];
-    if let Some(prior) = &opts.smooth {
-        let usable: Vec<bool> = (0..n)
-            .map(|f| ok[f] && res[f].status != FrameStatus::Outlier)
-            .collect();
-        let rot: Vec<_> = res.iter().map(|r| rotation_of(&r.pose)).collect();
-        let s = smooth_corrections(&deltas, &rot, &usable, &opts.frame_numbers, prior);
-        noise = s.noise;
-        for (f, d) in s.corrections.iter().enumerate() {
-            res[f].pose = apply_delta(&poses[f], d);
-            res[f].correction = *d;
-        }
-    }
+    let noise = match &opts.smooth {
+        Some(prior) => smooth(&mut res, &ok, &deltas, poses, &opts.frame_numbers, prior),
+        None => [0.0; 6],
+    };
     let mut counts = BTreeMap::new();
     for r in &res {
         *counts.entry(r.status.name().to_string()).or_insert(0) += 1;
@@ -291,4 +282,26 @@ pub fn refine_video(
         measured,
         noise,
     })
+}
+
+/// Replace each frame's correction by the smoothed one (see [`super::prior`]); frames not `ok`
+/// or flagged as outliers take the drift alone. Returns the registration noise per axis.
+fn smooth(
+    res: &mut [FrameRegistration],
+    ok: &[bool],
+    deltas: &[PoseDelta],
+    poses: &[Affine],
+    frame_numbers: &[usize],
+    prior: &DriftPrior,
+) -> [f64; 6] {
+    let usable: Vec<bool> = (0..res.len())
+        .map(|f| ok[f] && res[f].status != FrameStatus::Outlier)
+        .collect();
+    let rot: Vec<_> = res.iter().map(|r| rotation_of(&r.pose)).collect();
+    let s = smooth_corrections(deltas, &rot, &usable, frame_numbers, prior);
+    for (f, d) in s.corrections.iter().enumerate() {
+        res[f].pose = apply_delta(&poses[f], d);
+        res[f].correction = *d;
+    }
+    s.noise
 }
