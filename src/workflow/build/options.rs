@@ -134,11 +134,10 @@ impl Default for BuildOptions {
             chroma_refits: 2,
             refine_gains: 2,
             // The uniform term: gathered + uniform (`both`) scores better on the path-traced
-            // Mitsuba case (new views 33.33 -> 37.46 dB) but the photometric registration still
-            // predicts with the uniform term alone, so a model built with `both` registers
-            // worse (tests/registration.rs: the first round 1.33 -> 1.01 mm instead of halving
-            // the error), and the phantom's worst gain error rises 3.5 -> 5.1%
-            // (tests/cli_render.rs). BENCHMARKS.md, "Inter-reflection gathered from the geometry".
+            // Mitsuba case (new views 33.33 -> 37.46 dB) but the phantom's worst gain error rises
+            // to 5.1% (tests/cli_render.rs, bound 5%), and the photometric registration still
+            // predicts with the uniform term alone. BENCHMARKS.md, "Inter-reflection gathered
+            // from the geometry".
             interreflection: InterreflectionMode::Uniform,
             gather_nodes: 40,
             gather_rays: 36,
