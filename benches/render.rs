@@ -104,25 +104,15 @@ fn bench(c: &mut Criterion) {
         });
     }
     // The calibrated light (the default shading of a built model): rho(gamma) s(theta) / z².
-    let light = CalibratedModel {
-        rho: [
+    let light = CalibratedModel::new(
+        [
             vec![2.0, 40.0, 80.0, 120.0],
             vec![1.0, 20.0, 40.0, 60.0],
             vec![1.0, 15.0, 30.0, 45.0],
         ],
-        s: vec![1.0, 0.8, 0.6, 0.5],
-        cos_theta_edge: 0.5,
-        gains: vec![1.0],
-        reference_frame: 0,
-        ambient: None,
-        interreflection: None,
-        frame_light: None,
-        gathered: None,
-        frame_indirect: None,
-        auto_exposure: None,
-        rms_residual: [0.0; 3],
-        samples_used: 0,
-    };
+        vec![1.0, 0.8, 0.6, 0.5],
+        0.5,
+    );
     let shading = FittedShading::new(ShadingKind::Calibrated, psi, Some(light));
     let calibrated = RenderInputs {
         shading: &shading,

@@ -258,21 +258,11 @@ mod tests {
     use super::*;
 
     fn light(s: Vec<f64>) -> CalibratedModel {
-        CalibratedModel {
-            rho: [vec![0.0, 2.0], vec![0.0, 1.0], vec![0.0, 0.5]],
+        CalibratedModel::new(
+            [vec![0.0, 2.0], vec![0.0, 1.0], vec![0.0, 0.5]],
             s,
-            cos_theta_edge: 60f64.to_radians().cos(),
-            gains: vec![1.0],
-            reference_frame: 0,
-            ambient: None,
-            interreflection: None,
-            frame_light: None,
-            gathered: None,
-            frame_indirect: None,
-            auto_exposure: None,
-            rms_residual: [0.0; 3],
-            samples_used: 0,
-        }
+            60f64.to_radians().cos(),
+        )
     }
 
     #[test]

@@ -127,11 +127,6 @@ impl BakedAlbedo {
         self.n
     }
 
-    /// Bytes the samples take.
-    pub fn bytes(&self) -> usize {
-        std::mem::size_of_val(self.samples.as_slice())
-    }
-
     /// The albedo at barycentric weights `bary` (second, third vertex) of triangle `tri`:
     /// linear interpolation in the lattice cell around it.
     #[inline]

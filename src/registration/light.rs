@@ -123,25 +123,15 @@ mod tests {
     use crate::registration::pose::{perturb, rotation_of};
 
     fn model() -> CalibratedModel {
-        CalibratedModel {
-            rho: [
+        CalibratedModel::new(
+            [
                 vec![0.1, 0.5, 0.9, 1.2],
                 vec![0.2, 0.4, 0.6, 0.7],
                 vec![0.05, 0.3, 0.2, 0.9],
             ],
-            s: vec![1.0, 0.7, 0.3],
-            cos_theta_edge: 0.3,
-            gains: vec![1.0],
-            reference_frame: 0,
-            ambient: None,
-            interreflection: None,
-            frame_light: None,
-            gathered: None,
-            frame_indirect: None,
-            rms_residual: [0.0; 3],
-            samples_used: 0,
-            auto_exposure: None,
-        }
+            vec![1.0, 0.7, 0.3],
+            0.3,
+        )
     }
 
     #[test]

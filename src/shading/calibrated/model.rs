@@ -71,6 +71,27 @@ pub struct CalibratedModel {
 }
 
 impl CalibratedModel {
+    /// A light of one frame at gain 1 with no inter-reflection or ambient term: `rho` per
+    /// channel and `s` as Bernstein coefficients (see the fields), `cos_theta_edge` the edge
+    /// of `s`'s domain. For lights known in advance (tests, benchmarks, synthetic cases).
+    pub fn new(rho: [Vec<f64>; 3], s: Vec<f64>, cos_theta_edge: f64) -> Self {
+        CalibratedModel {
+            rho,
+            s,
+            cos_theta_edge,
+            gains: vec![1.0],
+            reference_frame: 0,
+            ambient: None,
+            interreflection: None,
+            frame_light: None,
+            gathered: None,
+            frame_indirect: None,
+            auto_exposure: None,
+            rms_residual: [0.0; 3],
+            samples_used: 0,
+        }
+    }
+
     /// The normalised angle coordinate t of `cos_theta` (0 on the axis, 1 at the edge),
     /// clamped to [0, 1].
     #[inline]

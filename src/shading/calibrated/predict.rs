@@ -89,21 +89,11 @@ mod tests {
 
     #[test]
     fn prediction_gain_and_psnr() {
-        let m = CalibratedModel {
-            rho: [vec![50.0; 4], vec![25.0; 4], vec![10.0; 4]],
-            s: vec![1.0, 1.0],
-            cos_theta_edge: 0.5,
-            gains: vec![1.0],
-            reference_frame: 0,
-            ambient: None,
-            interreflection: None,
-            frame_light: None,
-            gathered: None,
-            frame_indirect: None,
-            auto_exposure: None,
-            rms_residual: [0.0; 3],
-            samples_used: 0,
-        };
+        let m = CalibratedModel::new(
+            [vec![50.0; 4], vec![25.0; 4], vec![10.0; 4]],
+            vec![1.0, 1.0],
+            0.5,
+        );
         let pred = predict_pixels(
             &m,
             &[0.5, 0.5],

@@ -131,21 +131,7 @@ mod tests {
 
     /// A Lambertian light, rho(gamma) = rho1 gamma per channel, isotropic (s = 1 everywhere).
     fn lambertian(rho1: [f64; 3]) -> CalibratedModel {
-        CalibratedModel {
-            rho: rho1.map(|r| vec![0.0, r]),
-            s: vec![1.0],
-            cos_theta_edge: -0.999,
-            gains: vec![1.0],
-            reference_frame: 0,
-            ambient: None,
-            interreflection: None,
-            frame_light: None,
-            gathered: None,
-            frame_indirect: None,
-            auto_exposure: None,
-            rms_residual: [0.0; 3],
-            samples_used: 0,
-        }
+        CalibratedModel::new(rho1.map(|r| vec![0.0, r]), vec![1.0], -0.999)
     }
 
     /// Albedo 0.5 on the triangles with x > 0, 1 elsewhere.
