@@ -118,18 +118,28 @@ fn dicom_folder_is_inspected_as_a_ct() {
     );
     // Same extremes as the reference decoders (tests/data/dicom_real_reference.json).
     assert_eq!(r["ct"]["hu_range"], json!([-1024.0, 1450.0]));
-    // A folder holding a DICOM series and a text file is a bad series, named as such.
+    // A series copied with its licence and notes: they are left out, and the summary says so.
     let tmp = tempfile::tempdir().unwrap();
     for e in std::fs::read_dir(data("dicom_real/j2k_sign_mismatch")).unwrap() {
         let p = e.unwrap().path();
         std::fs::copy(&p, tmp.path().join(p.file_name().unwrap())).unwrap();
     }
     std::fs::write(tmp.path().join("notes.txt"), "not a slice").unwrap();
+    std::fs::write(tmp.path().join("LICENSE"), "CC BY 4.0").unwrap();
+    let (ok, out, err, _) = inspect(tmp.path(), &[]);
+    assert!(ok, "{err}");
+    assert!(out.contains("3 slices"), "{out}");
+    assert!(
+        err.contains("left out 2 file(s) that are not DICOM slices: LICENSE, notes.txt"),
+        "{err}"
+    );
+    // Any other file without the DICOM marker is a bad series, named as such.
+    std::fs::write(tmp.path().join("slice_x"), "not a slice").unwrap();
     let (ok, _, err, _) = inspect(tmp.path(), &[]);
     assert!(!ok);
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(
-        err.contains("notes.txt") && err.contains("not a DICOM file"),
+        err.contains("slice_x") && err.contains("not a DICOM file"),
         "{err}"
     );
 }

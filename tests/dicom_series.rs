@@ -264,8 +264,33 @@ fn huge_header_fails_before_allocating() {
 }
 
 #[test]
-fn non_dicom_file_fails() {
-    expect_error("not_dicom", &["not_dicom/notes.txt", "not a DICOM file"]);
+fn documents_beside_the_slices_are_left_out_and_named() {
+    // not_dicom/ holds two slices and notes.txt, as a series copied with its read-me.
+    let (volume, info) = read_dicom_series_with_info(&data("not_dicom")).unwrap();
+    assert_eq!(info.files.len(), 2);
+    assert_eq!(volume.dims[2], 2);
+    let skipped: Vec<_> = info
+        .skipped_files
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(skipped, ["notes.txt"]);
+}
+
+#[test]
+fn a_file_that_is_neither_slice_nor_document_fails() {
+    // A damaged slice (no DICOM marker) is never dropped silently.
+    let tmp = tempfile::tempdir().unwrap();
+    for name in ["IM0000.dcm", "IM0001.dcm"] {
+        std::fs::copy(data("not_dicom").join(name), tmp.path().join(name)).unwrap();
+    }
+    std::fs::write(tmp.path().join("IM0002.dcm"), vec![7u8; 400]).unwrap();
+    let err = read_dicom_series(tmp.path()).unwrap_err().to_string();
+    assert!(
+        err.contains("IM0002.dcm") && err.contains("not a DICOM file"),
+        "{err}"
+    );
+    assert!(!err.contains('\n'), "{err}");
 }
 
 #[test]

@@ -52,6 +52,23 @@ pub struct DicomCtInfo {
     pub series_description: String,
 }
 
+/// The note that documents in a series folder were left out, naming them.
+fn skipped_warning(dir: &Path, skipped: &[std::path::PathBuf]) -> Option<String> {
+    if skipped.is_empty() {
+        return None;
+    }
+    let names: Vec<String> = skipped
+        .iter()
+        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect();
+    Some(format!(
+        "{}: left out {} file(s) that are not DICOM slices: {}",
+        dir.display(),
+        names.len(),
+        names.join(", ")
+    ))
+}
+
 /// Find the CT of the case in `case_dir`: exactly one of ct.nii.gz, ct.nii or ct/.
 pub fn find_ct(case_dir: &Path) -> Result<CtSource> {
     let candidates = [("ct.nii.gz", false), ("ct.nii", false), ("ct", true)];
@@ -122,7 +139,7 @@ pub fn read_ct(source: &CtSource) -> Result<(Volume<f32>, CtInfo)> {
                 CtInfo {
                     format: "dicom",
                     affine_source: "ImagePositionPatient/ImageOrientationPatient (LPS→RAS)".into(),
-                    warnings: Vec::new(),
+                    warnings: skipped_warning(dir, &s.skipped_files).into_iter().collect(),
                     dicom: Some(DicomCtInfo {
                         transfer_syntax,
                         slices: s.files.len(),

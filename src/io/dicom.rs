@@ -13,9 +13,12 @@
 //! between positions (s = step·(r × c) unless the gantry was tilted). RAS = diag(−1, −1, 1)·LPS.
 //!
 //! Policies:
-//! - Every regular file in the folder except hidden files and `DICOMDIR` must be a DICOM slice
-//!   of the series; anything else (a text file, a 2-D localizer, a second series) is an error
-//!   naming the file, so that a volume is never silently built from part of a folder.
+//! - Every regular file in the folder except hidden files, `DICOMDIR` and the documents that
+//!   travel with a series (named LICENSE, README..., or *.txt, *.md, *.pdf, ..., and without the
+//!   DICOM marker; listed in [`DicomSeriesInfo::skipped_files`] and warned about) must be a
+//!   DICOM slice of the series; anything else (a damaged slice, a 2-D localizer, a second
+//!   series) is an error naming the file, so that a volume is never silently built from part
+//!   of a folder.
 //! - A single-slice series takes its slice spacing from SpacingBetweenSlices, else
 //!   SliceThickness, else fails.
 //! - A header whose Rows × Columns × BitsAllocated exceed what the file could hold (1024× its
@@ -57,6 +60,8 @@ pub struct DicomSeriesInfo {
     pub files: Vec<PathBuf>,
     /// Distance between adjacent slices along the slice normal, mm.
     pub slice_step_mm: f64,
+    /// Documents in the folder that are not slices (a licence, a read-me), left out.
+    pub skipped_files: Vec<PathBuf>,
 }
 
 /// Read the CT series in folder `dir` as HU with its index → RAS mm affine.
@@ -68,9 +73,11 @@ pub fn read_dicom_series(dir: &Path) -> Result<Volume<f32>> {
 
 /// Like [`read_dicom_series`], also returning the series' [`DicomSeriesInfo`].
 pub fn read_dicom_series_with_info(dir: &Path) -> Result<(Volume<f32>, DicomSeriesInfo)> {
-    let files = list_series_files(dir)?;
+    let (files, skipped) = list_series_files_skipping(dir)?;
     let sources: Vec<Source<'_>> = files.iter().map(|f| Source::File(f)).collect();
-    read_sources(dir, &sources)
+    let (volume, mut info) = read_sources(dir, &sources)?;
+    info.skipped_files = skipped;
+    Ok((volume, info))
 }
 
 /// Read a series from an explicit list of slice files (in any order); errors about the series
@@ -93,9 +100,15 @@ pub fn read_dicom_series_from_memory(
     read_sources(Path::new("<memory>"), &sources)
 }
 
-/// The files of a series folder, sorted by name: every regular file except hidden ones and
-/// `DICOMDIR`. Fails when `dir` is missing, unreadable, or holds no such file.
+/// The files of a series folder, sorted by name: every regular file except hidden ones,
+/// `DICOMDIR`, and documents that travel with a series (see [`is_companion_document`]).
+/// Fails when `dir` is missing, unreadable, or holds no such file.
 pub fn list_series_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    list_series_files_skipping(dir).map(|(files, _)| files)
+}
+
+/// [`list_series_files`], also returning the companion documents it left out.
+pub fn list_series_files_skipping(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>)> {
     if !dir.exists() {
         return Err(Error::missing(dir, "DICOM series folder"));
     }
@@ -105,7 +118,7 @@ pub fn list_series_files(dir: &Path) -> Result<Vec<PathBuf>> {
             "is not a folder; give the folder holding the DICOM series",
         ));
     }
-    let mut files = Vec::new();
+    let (mut files, mut skipped) = (Vec::new(), Vec::new());
     for entry in std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))? {
         let entry = entry.map_err(|e| Error::io(dir, e))?;
         let path = entry.path();
@@ -114,7 +127,11 @@ pub fn list_series_files(dir: &Path) -> Result<Vec<PathBuf>> {
         if name.starts_with('.') || name.eq_ignore_ascii_case("DICOMDIR") || !path.is_file() {
             continue;
         }
-        files.push(path);
+        if is_companion_document(&path) {
+            skipped.push(path);
+        } else {
+            files.push(path);
+        }
     }
     if files.is_empty() {
         return Err(Error::invalid(
@@ -123,7 +140,41 @@ pub fn list_series_files(dir: &Path) -> Result<Vec<PathBuf>> {
         ));
     }
     files.sort();
-    Ok(files)
+    skipped.sort();
+    Ok((files, skipped))
+}
+
+/// A licence, read-me or other document copied along with a series (LICENSE, README.md,
+/// notes.txt, a screenshot): named like one and without the DICOM marker. Any other file
+/// without the marker is still an error, so a damaged slice is never dropped silently.
+fn is_companion_document(path: &Path) -> bool {
+    const NAMES: [&str; 6] = [
+        "license", "licence", "readme", "copying", "notice", "authors",
+    ];
+    const EXTENSIONS: [&str; 14] = [
+        "txt", "md", "rst", "pdf", "html", "htm", "json", "xml", "csv", "png", "jpg", "jpeg",
+        "log", "ini",
+    ];
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let ext = path
+        .extension()
+        .map(|s| s.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let named = NAMES.iter().any(|n| stem.starts_with(n)) || EXTENSIONS.contains(&ext.as_str());
+    named && !has_dicom_marker(path)
+}
+
+/// The file has the `DICM` marker at byte 128 (DICOM Part 10).
+fn has_dicom_marker(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = [0u8; 132];
+    std::fs::File::open(path)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .is_ok()
+        && &head[128..] == b"DICM"
 }
 
 fn read_sources(dir: &Path, sources: &[Source<'_>]) -> Result<(Volume<f32>, DicomSeriesInfo)> {
@@ -161,6 +212,7 @@ fn read_sources(dir: &Path, sources: &[Source<'_>]) -> Result<(Volume<f32>, Dico
             .to_string(),
         files: geo.slices.iter().map(|s| s.path.clone()).collect(),
         slice_step_mm: geo.slice_step,
+        skipped_files: Vec::new(),
     };
     let volume = Volume::from_data([nx, ny, nz], geo.affine, data)
         .map_err(|e| Error::invalid(dir, e.to_string()))?;

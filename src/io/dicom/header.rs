@@ -66,7 +66,7 @@ impl<'a> Source<'a> {
         if got < head.len() || &head[128..132] != b"DICM" {
             return Err(Error::invalid(
                 self.name(),
-                "not a DICOM file (no 'DICM' marker at byte 128); a series folder must hold only DICOM files",
+                "not a DICOM file (no 'DICM' marker at byte 128); a series folder holds DICOM slices and may hold documents named as such (LICENSE, README.md, *.txt)",
             ));
         }
         Ok(Box::new(Cursor::new(*b"DICM").chain(reader)))
