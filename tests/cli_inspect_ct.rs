@@ -143,3 +143,20 @@ fn dicom_folder_is_inspected_as_a_ct() {
         "{err}"
     );
 }
+
+#[test]
+fn a_reader_that_stops_early_is_not_an_error() {
+    // `bronchosim inspect CT | head`: the pipe is closed before the summary is written.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bronchosim"))
+        .arg("inspect")
+        .arg(data("nifti/int16_flipped_sform.nii.gz"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}

@@ -149,8 +149,8 @@ fn inspect_ct_or_case(a: InspectArgs, quiet: bool) -> anyhow::Result<String> {
     }
     // The summary is the command's output: printed even with --quiet.
     match a.json {
-        true => println!("{}", serde_json::to_string_pretty(&report)?),
-        false => print!("{}", report.to_text()),
+        true => write_stdout(&format!("{}\n", serde_json::to_string_pretty(&report)?))?,
+        false => write_stdout(&report.to_text())?,
     }
     Ok(String::new())
 }
@@ -266,10 +266,21 @@ fn evaluate(a: EvaluateArgs) -> anyhow::Result<String> {
     .with_context(|| format!("evaluate {}", a.rendered.display()))?;
     // The scores are the command's output: printed even with --quiet.
     match a.json {
-        true => println!("{}", serde_json::to_string_pretty(&scores)?),
-        false => print!("{}", scores_text(&scores)),
+        true => write_stdout(&format!("{}\n", serde_json::to_string_pretty(&scores)?))?,
+        false => write_stdout(&scores_text(&scores))?,
     }
     Ok(String::new())
+}
+
+/// Write `text` to stdout. A reader that stops early (`| head`) closes the pipe: that is not
+/// an error of ours (print! would panic).
+fn write_stdout(text: &str) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => other,
+    }
 }
 
 fn main() -> ExitCode {
@@ -277,7 +288,10 @@ fn main() -> ExitCode {
     match run(cli.command, cli.quiet) {
         Ok(summary) => {
             if !cli.quiet {
-                print!("{summary}");
+                if let Err(e) = write_stdout(&summary) {
+                    eprintln!("error: writing the summary: {e}");
+                    return ExitCode::FAILURE;
+                }
             }
             ExitCode::SUCCESS
         }
