@@ -283,6 +283,19 @@ fn write_stdout(text: &str) -> std::io::Result<()> {
     }
 }
 
+/// The error and its causes on one line, each cause once: the library's messages already
+/// quote the operating system's (e.g. "PATH: No such file or directory").
+fn one_line(e: &anyhow::Error) -> String {
+    let mut line = e.to_string();
+    for cause in e.chain().skip(1) {
+        let cause = cause.to_string();
+        if !line.contains(&cause) {
+            line = format!("{line}: {cause}");
+        }
+    }
+    line
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli.command, cli.quiet) {
@@ -296,7 +309,7 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", one_line(&e));
             ExitCode::FAILURE
         }
     }
