@@ -4,7 +4,13 @@
 //!
 //! ```sh
 //! cargo run --release --example register_rounds -- CASE WORK [rounds=3] [first=chroma|texture]
+//!     [start=DIR] [final=yes|no] [floor=F] [sigma=S] [huber=H] [gain=yes|no] [coarsest=L]
+//!     [chw=R,G,B]
 //! ```
+//! `start=CASE/truth` starts from the true poses (what a round does to them: its bias);
+//! `floor`, `sigma`, `huber`, `gain`, `coarsest`, `chw` set the per-frame registration's options.
+//! Each round writes `round_N/errors.csv`: per frame, the error of its own (`measured`) and of
+//! the smoothed pose against the truth, in the true camera's axes (mm, degrees).
 //! CASE is a phantom case with `truth/poses.json` (e.g. `bronchosim phantom --pose-noise-mm 1.5
 //! --pose-noise-deg 2`). WORK receives `round_N/case` (frames hard-linked) and `round_N/model`,
 //! and a final model built with the last poses and scored on the truth views
@@ -106,12 +112,28 @@ fn main() -> anyhow::Result<()> {
     let work = PathBuf::from(&args[1]);
     let (mut rounds, mut first_chroma) = (3usize, true);
     let (mut relax, mut start): (f64, Option<PathBuf>) = (1.0, None);
+    let mut frame_opts = RegistrationOptions {
+        // Red carries the shading with the least albedo (measured: z error 0.38 -> 0.25 mm).
+        uniform_channel_weights: [1.0, 0.0, 0.0],
+        ..Default::default()
+    };
+    let mut final_model = true;
     for kv in &args[2..] {
         match kv.split_once('=') {
             Some(("rounds", v)) => rounds = v.parse()?,
             Some(("first", v)) => first_chroma = v == "chroma",
             Some(("relax", v)) => relax = v.parse()?,
             Some(("start", v)) => start = Some(PathBuf::from(v)),
+            Some(("floor", v)) => frame_opts.noise_floor = v.parse()?,
+            Some(("sigma", v)) => frame_opts.relative_sigma = v.parse()?,
+            Some(("huber", v)) => frame_opts.huber = v.parse()?,
+            Some(("final", v)) => final_model = v == "yes",
+            Some(("gain", v)) => frame_opts.estimate_gain = v == "yes",
+            Some(("coarsest", v)) => frame_opts.coarsest_level = v.parse()?,
+            Some(("chw", v)) => {
+                let w: Vec<f32> = v.split(',').map(|x| x.parse()).collect::<Result<_, _>>()?;
+                frame_opts.uniform_channel_weights = [w[0], w[1], w[2]];
+            }
             _ => anyhow::bail!("unknown argument {kv}"),
         }
     }
@@ -156,9 +178,7 @@ fn main() -> anyhow::Result<()> {
         let chroma = r == 1 && first_chroma;
         let opts = RegistrationOptions {
             uniform_albedo_from_level: if chroma { 0 } else { usize::MAX },
-            // Red carries the shading with the least albedo (measured: z error 0.38 -> 0.25 mm).
-            uniform_channel_weights: [1.0, 0.0, 0.0],
-            ..Default::default()
+            ..frame_opts.clone()
         };
         let reg = FrameRegistrar::new(
             ModelParts {
@@ -191,6 +211,24 @@ fn main() -> anyhow::Result<()> {
             &VideoOptions::default(),
         )?;
         let t_reg = t.elapsed().as_secs_f64();
+        // Per-frame errors (camera axes) of the frames' own and the smoothed poses.
+        let mut csv = String::from("frame,kind,x,y,z,rx,ry,rz\n");
+        for (kind, set) in [
+            ("measured", v.measured.clone()),
+            (
+                "smoothed",
+                v.frames.iter().map(|f| f.pose).collect::<Vec<_>>(),
+            ),
+        ] {
+            for (i, (a, b)) in set.iter().zip(&truth).enumerate() {
+                let (t, r) = pose_error_axes(a, b);
+                csv += &format!(
+                    "{i},{kind},{},{},{},{},{},{}\n",
+                    t[0], t[1], t[2], r[0], r[1], r[2]
+                );
+            }
+        }
+        std::fs::write(dir.join("errors.csv"), csv)?;
         // Over-relaxation of the smooth part of the corrections (experiment): the texture
         // follows the poses, so a round removes only a fraction of a smooth drift.
         let deltas: Vec<_> = v
@@ -229,6 +267,9 @@ fn main() -> anyhow::Result<()> {
             v.counts,
             score(&poses_of(&entries), &truth)
         );
+    }
+    if !final_model {
+        return Ok(());
     }
     let dir = work.join("final");
     if dir.join("case").exists() {
