@@ -114,6 +114,10 @@ pub struct ModelManifest {
     /// it was recorded).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unseen_walls: Option<UnseenWalls>,
+    /// The albedo's gradient across and within the borders of the regions different frames
+    /// dominate (absent in models written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fusion_seams: Option<crate::texture::seams::SeamStats>,
     /// What the build could not do as asked (e.g. a failed calibrated fit).
     pub warnings: Vec<String>,
     /// Mean L2 stretch of the atlas.

@@ -62,6 +62,7 @@ impl CoarseTexels {
             rgb: vec![0.0; coarse.rgb.len()],
             covered: vec![false; coarse.covered.len()],
             frames_seen: vec![0; coarse.frames_seen.len()],
+            dominant_frame: vec![u32::MAX; coarse.dominant_frame.len()],
             stats: coarse.stats.clone(),
         };
         let (w, f) = (fine.width, self.factor);
@@ -77,6 +78,7 @@ impl CoarseTexels {
             out.rgb[3 * t..3 * t + 3].copy_from_slice(&coarse.rgb[3 * anchor..3 * anchor + 3]);
             out.covered[t] = coarse.covered[anchor];
             out.frames_seen[t] = coarse.frames_seen[anchor];
+            out.dominant_frame[t] = coarse.dominant_frame[anchor];
             covered += usize::from(coarse.covered[anchor]);
         }
         out.stats.chart_texels = fine.len();
@@ -129,6 +131,7 @@ mod tests {
             rgb: vec![0.0; 3 * n],
             covered: vec![false; n],
             frames_seen: vec![0; n],
+            dominant_frame: vec![u32::MAX; n],
             stats: Default::default(),
         };
         for &t in &kept {

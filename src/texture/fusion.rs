@@ -9,20 +9,27 @@
 //!   around the texels f won) and accumulates `sum_f blur(W_f) v_f / sum_f blur(W_f)` over the
 //!   texels f sees.
 //!
+//! * [`FusionMethod::RobustAverage`]: the weighted average, then passes that re-weight each
+//!   observation by its agreement with the previous pass's average (`robust`).
+//!
+//! * [`FusionMethod::MultiBand`]: the broad average's low frequencies and a sharp average's
+//!   high frequencies (`multiband`).
+//!
 //! Memory is O(texels) in both methods, independent of the number of frames: the frames are
 //! streamed ([`FrameStream`]) and re-read in pass 2 instead of keeping their de-lit values.
 
 // Parallel arrays indexed by channel read clearer than zips.
 #![allow(clippy::needless_range_loop)]
 
-use rayon::prelude::*;
-
 use super::atlas::fill_uncovered;
-use super::blur::{blur_rect, gaussian_kernel};
-use super::delight::{max_ray_angle, DelightOptions, FrameCtx, Observation};
+use super::delight::{DelightOptions, FrameCtx, Observation};
+use super::max_weight::blend_pass;
+use super::multiband::{multiband_pass, MultiBandOptions};
+use super::pass::{for_visible_blocks, weight_power, Acc, CameraCache, Seen};
+use super::robust::{reweight_passes, RobustOptions};
+use super::seams::{seam_stats, SeamStats};
 use super::synthesis::{complete_unseen, SynthesisOptions, SynthesisStats};
-use super::texels::{TexelRect, TexelSet, BLOCK};
-use crate::camera::Camera;
+use super::texels::TexelSet;
 use crate::image::ImageError;
 use crate::{Error, Result};
 
@@ -45,6 +52,32 @@ pub enum FusionMethod {
         /// Power of the predicted intensity used as the weight (1 or more).
         weight_exponent: f32,
     },
+    /// The weighted average, then `rounds` passes that re-weight every observation by how
+    /// well it agrees with the previous pass's average (iteratively reweighted least squares,
+    /// Cauchy loss): a frame that is misregistered, blurred or wrongly shaded at a texel
+    /// disagrees with the consensus of the others there and counts less, so the texture keeps
+    /// the detail the agreeing frames share. Weights change smoothly with the disagreement,
+    /// so no seam appears where one frame starts to count less.
+    RobustAverage {
+        /// Power of the predicted intensity in the weight, as [`FusionMethod::WeightedAverage`].
+        weight_exponent: f32,
+        /// Relative difference `|v - m| / |m|` (RGB norms, unitless) at which an observation's
+        /// weight is halved.
+        residual_scale: f32,
+        /// Re-weighting passes (each reads every frame once more).
+        rounds: u32,
+    },
+    /// The low frequencies of the weighted average with `weight_exponent` and the high
+    /// frequencies of the one with `detail_exponent` (near the best frame's values), split by
+    /// a Gaussian of `sigma_texels` within the chart (`multiband`). One pass.
+    MultiBand {
+        /// Power of the predicted intensity in the broad average (low band).
+        weight_exponent: f32,
+        /// Power of the predicted intensity in the sharp average (high band).
+        detail_exponent: f32,
+        /// Standard deviation of the band split (texels).
+        sigma_texels: f32,
+    },
 }
 
 /// The fusion methods by name (the command line's `--fusion`).
@@ -54,6 +87,12 @@ pub enum FusionKind {
     Average,
     /// The paper's max-weight choice with smoothed weights (`FusionMethod::MaxWeightSmoothed`).
     Max,
+    /// The weighted average re-weighted by agreement with the consensus
+    /// (`FusionMethod::RobustAverage`).
+    Robust,
+    /// The average's low frequencies and the best frames' high frequencies
+    /// (`FusionMethod::MultiBand`).
+    MultiBand,
 }
 
 /// Default power of the predicted intensity in the weighted average (inverse-variance weights).
@@ -61,6 +100,18 @@ pub const DEFAULT_WEIGHT_EXPONENT: f32 = 2.0;
 
 /// Default smoothing of the max-weight maps (texels).
 pub const DEFAULT_SIGMA_TEXELS: f32 = 2.0;
+
+/// Default relative disagreement that halves an observation's weight in the robust average.
+pub const DEFAULT_RESIDUAL_SCALE: f32 = 0.3;
+
+/// Default re-weighting passes of the robust average.
+pub const DEFAULT_ROBUST_ROUNDS: u32 = 2;
+
+/// Default power of the predicted intensity in the multi-band fusion's sharp average.
+pub const DEFAULT_DETAIL_EXPONENT: f32 = 8.0;
+
+/// Default band split of the multi-band fusion (texels).
+pub const DEFAULT_BAND_SIGMA_TEXELS: f32 = 4.0;
 
 impl FusionMethod {
     /// The method `kind`; `weight_exponent` (1 or more) is the weighted average's.
@@ -70,6 +121,16 @@ impl FusionMethod {
             FusionKind::Max => FusionMethod::MaxWeightSmoothed {
                 sigma_texels: DEFAULT_SIGMA_TEXELS,
             },
+            FusionKind::Robust => FusionMethod::RobustAverage {
+                weight_exponent,
+                residual_scale: DEFAULT_RESIDUAL_SCALE,
+                rounds: DEFAULT_ROBUST_ROUNDS,
+            },
+            FusionKind::MultiBand => FusionMethod::MultiBand {
+                weight_exponent,
+                detail_exponent: DEFAULT_DETAIL_EXPONENT,
+                sigma_texels: DEFAULT_BAND_SIGMA_TEXELS,
+            },
         }
     }
 
@@ -77,7 +138,8 @@ impl FusionMethod {
     pub fn passes(&self) -> usize {
         match self {
             FusionMethod::MaxWeightSmoothed { .. } => 2,
-            FusionMethod::WeightedAverage { .. } => 1,
+            FusionMethod::WeightedAverage { .. } | FusionMethod::MultiBand { .. } => 1,
+            FusionMethod::RobustAverage { rounds, .. } => 1 + *rounds as usize,
         }
     }
 }
@@ -142,6 +204,8 @@ pub struct FusionStats {
     /// Heap bytes of the per-texel fusion state (excluding the [`TexelSet`] and the output).
     /// It does not depend on the number of frames.
     pub state_bytes: usize,
+    /// Gradients across and within the borders of the regions different frames dominate.
+    pub seams: SeamStats,
 }
 
 /// The fused atlas.
@@ -158,6 +222,9 @@ pub struct FusedTexture {
     pub covered: Vec<bool>,
     /// Frames that gave the texel a value (atlas-sized).
     pub frames_seen: Vec<u32>,
+    /// The frame of largest predicted intensity at each covered texel (atlas-sized,
+    /// `u32::MAX` where not covered): the frame that dominates it.
+    pub dominant_frame: Vec<u32>,
     /// Counts.
     pub stats: FusionStats,
 }
@@ -193,20 +260,6 @@ impl FusedTexture {
     }
 }
 
-/// Running sum of one texel: weighted value and weight.
-#[derive(Clone, Copy, Default)]
-struct Acc {
-    rgb: [f32; 3],
-    w: f32,
-}
-
-/// Best frame of one texel so far.
-#[derive(Clone, Copy)]
-struct Best {
-    w: f32,
-    frame: u32,
-}
-
 /// Fuse the frames of `frames` into the atlas of `texels` (see the module documentation).
 pub fn fuse<S: FrameStream + ?Sized>(
     texels: &TexelSet,
@@ -222,76 +275,93 @@ pub fn fuse<S: FrameStream + ?Sized>(
         });
     }
     let mut cams = CameraCache::default();
-    let mut seen = vec![0u32; n];
+    let mut seen = vec![Seen::default(); n];
     let mut acc = vec![Acc::default(); n];
-    let mut state_bytes = n * (std::mem::size_of::<u32>() + std::mem::size_of::<Acc>());
+    let mut state_bytes = n * (std::mem::size_of::<Seen>() + std::mem::size_of::<Acc>());
+    if let FusionMethod::MultiBand {
+        weight_exponent,
+        detail_exponent,
+        sigma_texels,
+    } = opts.method
+    {
+        let bands = MultiBandOptions {
+            weight_exponent,
+            detail_exponent,
+            sigma_texels,
+        };
+        state_bytes += multiband_pass(
+            texels,
+            frames,
+            &opts.delight,
+            &mut cams,
+            &bands,
+            &mut seen,
+            &mut acc,
+        )?;
+        return Ok(output(texels, &acc, &seen, nf, state_bytes));
+    }
+    // Pass 1: the weighted average (max-weight only needs `seen`; the robust average starts
+    // from the plain mean of the frames, its consensus).
+    let exponent = match opts.method {
+        FusionMethod::WeightedAverage { weight_exponent }
+        | FusionMethod::MultiBand {
+            weight_exponent, ..
+        } => weight_exponent,
+        FusionMethod::MaxWeightSmoothed { .. } => 1.0,
+        FusionMethod::RobustAverage { .. } => 0.0,
+    };
+    for f in 0..nf {
+        let obs = frames.observation(f)?;
+        let ctx = FrameCtx::new(&obs, &opts.delight, cams.angle(obs.camera))?;
+        let seen = Some((seen.as_mut_slice(), f as u32));
+        for_visible_blocks(texels, &ctx, &mut acc, seen, |a, v, w| {
+            let w = weight_power(w, exponent);
+            for ch in 0..3 {
+                a.rgb[ch] += w * v[ch];
+            }
+            a.w += w;
+        });
+    }
     match opts.method {
-        FusionMethod::WeightedAverage { weight_exponent } => {
-            for f in 0..nf {
-                let obs = frames.observation(f)?;
-                let ctx = FrameCtx::new(&obs, &opts.delight, cams.angle(obs.camera))?;
-                for_visible_blocks(texels, &ctx, &mut acc, &mut seen, |a, s, v, w| {
-                    let w = match weight_exponent {
-                        1.0 => w,
-                        2.0 => w * w,
-                        e => w.powf(e),
-                    };
-                    for ch in 0..3 {
-                        a.rgb[ch] += w * v[ch];
-                    }
-                    a.w += w;
-                    *s += 1;
-                });
-            }
-        }
+        FusionMethod::WeightedAverage { .. } | FusionMethod::MultiBand { .. } => {}
         FusionMethod::MaxWeightSmoothed { sigma_texels } => {
-            // Pass 1: non-maximum suppression.
-            let mut best = vec![
-                Best {
-                    w: 0.0,
-                    frame: u32::MAX
-                };
-                n
-            ];
-            for f in 0..nf {
-                let obs = frames.observation(f)?;
-                let ctx = FrameCtx::new(&obs, &opts.delight, cams.angle(obs.camera))?;
-                for_visible_blocks(texels, &ctx, &mut best, &mut seen, |b, s, _, w| {
-                    if w > b.w {
-                        *b = Best { w, frame: f as u32 };
-                    }
-                    *s += 1;
-                });
-            }
-            // Texels ordered by winning frame (then slot, hence chart): pass 2 walks this list
-            // with one cursor instead of keeping per-frame lists.
-            let mut order: Vec<u32> = (0..n as u32)
-                .filter(|&s| best[s as usize].frame != u32::MAX)
-                .collect();
-            order.par_sort_unstable_by_key(|&s| (best[s as usize].frame, s));
-            state_bytes += n * std::mem::size_of::<Best>() + n * std::mem::size_of::<u32>();
-            // Pass 2: blend with the smoothed suppressed weight maps.
-            let kernel = gaussian_kernel(sigma_texels);
-            let radius = (kernel.len() / 2) as u32;
-            let mut cursor = 0usize;
-            for f in 0..nf {
-                let end = cursor
-                    + order[cursor..]
-                        .iter()
-                        .take_while(|&&s| best[s as usize].frame == f as u32)
-                        .count();
-                let won = &order[cursor..end];
-                cursor = end;
-                if won.is_empty() {
-                    continue; // this frame won nowhere: its smoothed weight map is zero
-                }
-                let obs = frames.observation(f)?;
-                let ctx = FrameCtx::new(&obs, &opts.delight, cams.angle(obs.camera))?;
-                blend_frame(texels, &ctx, won, &best, &kernel, radius, &mut acc);
-            }
+            acc.iter_mut().for_each(|a| *a = Acc::default());
+            blend_pass(
+                texels,
+                frames,
+                &opts.delight,
+                &mut cams,
+                &seen,
+                sigma_texels,
+                &mut acc,
+            )?;
+            state_bytes += n * std::mem::size_of::<u32>();
+        }
+        FusionMethod::RobustAverage {
+            weight_exponent,
+            residual_scale,
+            rounds,
+        } => {
+            let robust = RobustOptions {
+                weight_exponent,
+                residual_scale,
+                rounds,
+            };
+            state_bytes +=
+                reweight_passes(texels, frames, &opts.delight, &mut cams, &robust, &mut acc)?;
         }
     }
-    // Output in atlas layout.
+    Ok(output(texels, &acc, &seen, nf, state_bytes))
+}
+
+/// The fused values in atlas layout, with the counts and the seam measure.
+fn output(
+    texels: &TexelSet,
+    acc: &[Acc],
+    seen: &[Seen],
+    frames: usize,
+    state_bytes: usize,
+) -> FusedTexture {
     let (w, h) = (texels.width as usize, texels.height as usize);
     let mut out = FusedTexture {
         width: texels.width,
@@ -299,167 +369,27 @@ pub fn fuse<S: FrameStream + ?Sized>(
         rgb: vec![0.0; 3 * w * h],
         covered: vec![false; w * h],
         frames_seen: vec![0; w * h],
+        dominant_frame: vec![u32::MAX; w * h],
         stats: FusionStats {
-            frames: nf,
-            chart_texels: n,
+            frames,
+            chart_texels: texels.len(),
             covered_texels: 0,
             state_bytes,
+            seams: SeamStats::default(),
         },
     };
     for (s, a) in acc.iter().enumerate() {
         let t = texels.texel[s] as usize;
-        out.frames_seen[t] = seen[s];
+        out.frames_seen[t] = seen[s].count;
         if a.w > 0.0 {
             for ch in 0..3 {
                 out.rgb[3 * t + ch] = a.rgb[ch] / a.w;
             }
             out.covered[t] = true;
+            out.dominant_frame[t] = seen[s].best_frame;
             out.stats.covered_texels += 1;
         }
     }
-    Ok(out)
-}
-
-/// The view-cone angle of the last camera (cameras rarely change within a video).
-#[derive(Default)]
-struct CameraCache {
-    last: Option<(Camera, f64)>,
-}
-
-impl CameraCache {
-    fn angle(&mut self, cam: &Camera) -> f64 {
-        match self.last {
-            Some((c, a)) if c == *cam => a,
-            _ => {
-                let a = max_ray_angle(cam);
-                self.last = Some((*cam, a));
-                a
-            }
-        }
-    }
-}
-
-/// De-light every texel of the blocks the frame can see (parallel over blocks) and hand each
-/// valid `(value, weight)` to `update` with the texel's state and seen-counter.
-fn for_visible_blocks<T: Send>(
-    texels: &TexelSet,
-    ctx: &FrameCtx,
-    state: &mut [T],
-    seen: &mut [u32],
-    update: impl Fn(&mut T, &mut u32, [f32; 3], f32) + Sync,
-) {
-    state
-        .par_chunks_mut(BLOCK)
-        .zip(seen.par_chunks_mut(BLOCK))
-        .enumerate()
-        .for_each(|(b, (st, sn))| {
-            if !ctx.block_visible(&texels.blocks[b]) {
-                return;
-            }
-            let s0 = b * BLOCK;
-            for k in 0..st.len() {
-                if let Some((v, w)) = ctx.texel(texels.point[s0 + k], texels.normal[s0 + k]) {
-                    update(&mut st[k], &mut sn[k], v, w);
-                }
-            }
-        });
-}
-
-/// Pass 2 of one frame: per chart where it won, blur its suppressed weight map over the
-/// winners' rectangle grown by the kernel radius and accumulate the blurred weight times the
-/// frame's de-lit value on the texels it sees (parallel over charts).
-fn blend_frame(
-    texels: &TexelSet,
-    ctx: &FrameCtx,
-    won: &[u32],
-    best: &[Best],
-    kernel: &[f32],
-    radius: u32,
-    acc: &mut [Acc],
-) {
-    // Runs of `won` by chart (slots are ordered by chart).
-    let mut runs: Vec<(u32, &[u32])> = Vec::new();
-    let mut i = 0;
-    while i < won.len() {
-        let c = texels.chart[won[i] as usize];
-        let j = i + won[i..]
-            .iter()
-            .take_while(|&&s| texels.chart[s as usize] == c)
-            .count();
-        runs.push((c, &won[i..j]));
-        i = j;
-    }
-    // Disjoint mutable slices of the accumulators, one per chart in `runs` (increasing).
-    let mut tasks = Vec::with_capacity(runs.len());
-    let mut rest = acc;
-    let mut offset = 0usize;
-    for (c, slots) in runs {
-        let (lo, hi) = (
-            texels.chart_start[c as usize] as usize,
-            texels.chart_start[c as usize + 1] as usize,
-        );
-        let (_, tail) = rest.split_at_mut(lo - offset);
-        let (mine, tail) = tail.split_at_mut(hi - lo);
-        rest = tail;
-        offset = hi;
-        tasks.push((c, slots, lo, mine));
-    }
-    let w = texels.width;
-    tasks.into_par_iter().for_each_init(
-        || (Vec::new(), Vec::new()),
-        |(map, tmp), (c, slots, lo, mine)| {
-            let cr = texels.chart_rect[c as usize];
-            let mut r = TexelRect {
-                x0: u32::MAX,
-                y0: u32::MAX,
-                x1: 0,
-                y1: 0,
-            };
-            for &s in slots {
-                let t = texels.texel[s as usize];
-                let (x, y) = (t % w, t / w);
-                r.x0 = r.x0.min(x);
-                r.y0 = r.y0.min(y);
-                r.x1 = r.x1.max(x + 1);
-                r.y1 = r.y1.max(y + 1);
-            }
-            let r = TexelRect {
-                x0: r.x0.saturating_sub(radius).max(cr.x0),
-                y0: r.y0.saturating_sub(radius).max(cr.y0),
-                x1: (r.x1 + radius).min(cr.x1),
-                y1: (r.y1 + radius).min(cr.y1),
-            };
-            let (bw, bh) = ((r.x1 - r.x0) as usize, (r.y1 - r.y0) as usize);
-            map.clear();
-            map.resize(bw * bh, 0.0f32);
-            for &s in slots {
-                let t = texels.texel[s as usize];
-                let (x, y) = ((t % w - r.x0) as usize, (t / w - r.y0) as usize);
-                map[y * bw + x] = best[s as usize].w;
-            }
-            // Only this chart's texels hold weights, so the blur never mixes charts.
-            blur_rect(map, bw, bh, kernel, tmp);
-            for y in 0..bh {
-                for x in 0..bw {
-                    let b = map[y * bw + x];
-                    if b <= 0.0 {
-                        continue;
-                    }
-                    let t = (y + r.y0 as usize) * w as usize + x + r.x0 as usize;
-                    let s = texels.slot_of_texel[t];
-                    if s == u32::MAX || texels.chart[s as usize] != c {
-                        continue;
-                    }
-                    let s = s as usize;
-                    if let Some((v, _)) = ctx.texel(texels.point[s], texels.normal[s]) {
-                        let a = &mut mine[s - lo];
-                        for ch in 0..3 {
-                            a.rgb[ch] += b * v[ch];
-                        }
-                        a.w += b;
-                    }
-                }
-            }
-        },
-    );
+    out.stats.seams = seam_stats(&out, texels);
+    out
 }

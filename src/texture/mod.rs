@@ -13,7 +13,12 @@ mod blur;
 pub mod coarse;
 pub mod delight;
 pub mod fusion;
+mod max_weight;
+mod multiband;
 pub mod output;
+mod pass;
+mod robust;
+pub mod seams;
 pub mod synthesis;
 pub mod texels;
 

@@ -145,15 +145,31 @@ pub struct BuildArgs {
     /// Target edge length of the decimated lumen mesh (mm).
     #[arg(long, default_value_t = build_defaults().segment.mesh.decimate.target_edge_mm)]
     pub edge_mm: f64,
-    /// Fusion of the de-lit frames: the paper's max-weight choice with smoothed weights, or
-    /// the average weighted by the predicted intensity to the power
-    /// --fusion-weight-exponent.
+    /// Fusion of the de-lit frames: the paper's max-weight choice with smoothed weights, the
+    /// average weighted by the predicted intensity to the power --fusion-weight-exponent,
+    /// that average re-weighted by each observation's agreement with it (robust), or that
+    /// average's low frequencies with the best frames' fine detail (multi-band).
     #[arg(long, value_enum, default_value_t = FusionKind::Average)]
     pub fusion: FusionKind,
     /// Power of the predicted intensity that weights the average (1: the paper's first
     /// attempt; 2: inverse-variance weights for intensity errors of constant size).
     #[arg(long, default_value_t = bronchosim::texture::fusion::DEFAULT_WEIGHT_EXPONENT)]
     pub fusion_weight_exponent: f32,
+    /// Robust fusion: relative disagreement with the consensus (|v - m| / |m|) that halves an
+    /// observation's weight.
+    #[arg(long, default_value_t = bronchosim::texture::fusion::DEFAULT_RESIDUAL_SCALE)]
+    pub fusion_residual_scale: f32,
+    /// Robust fusion: re-weighting passes over the frames after the weighted average.
+    #[arg(long, default_value_t = bronchosim::texture::fusion::DEFAULT_ROBUST_ROUNDS)]
+    pub fusion_rounds: u32,
+    /// Multi-band fusion: power of the predicted intensity in the average that gives the fine
+    /// detail (high: close to the single best-lit, closest, most frontal frame).
+    #[arg(long, default_value_t = bronchosim::texture::fusion::DEFAULT_DETAIL_EXPONENT)]
+    pub fusion_detail_exponent: f32,
+    /// Multi-band fusion: standard deviation (texels) of the Gaussian that splits the low
+    /// band (all frames) from the high band (the best frames).
+    #[arg(long, default_value_t = bronchosim::texture::fusion::DEFAULT_BAND_SIGMA_TEXELS)]
+    pub fusion_band_sigma: f32,
     /// Texels no frame saw: mucosa synthesised from the seen texture (patch quilting, seamless
     /// at the border) or the chart's nearest seen colours pushed in (a flat fill).
     /// coverage.png keeps marking the seen texels either way.

@@ -62,10 +62,17 @@ fn demo(a: DemoArgs, quiet: bool) -> anyhow::Result<String> {
 }
 
 fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
-    if a.fusion == FusionKind::Average && a.fusion_weight_exponent < 1.0 {
+    if a.fusion != FusionKind::Max && a.fusion_weight_exponent < 1.0 {
         anyhow::bail!(
             "--fusion-weight-exponent {}: expected 1 or more",
             a.fusion_weight_exponent
+        );
+    }
+    let scale = a.fusion_residual_scale;
+    if a.fusion == FusionKind::Robust && !(scale.is_finite() && scale > 0.0) {
+        anyhow::bail!(
+            "--fusion-residual-scale {}: expected a positive number",
+            a.fusion_residual_scale
         );
     }
     let mut opts = BuildOptions {
@@ -93,6 +100,24 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
     opts.gather_rays = a.gather_rays;
     opts.gather_visibility = a.gather_visibility;
     opts.fusion.method = FusionMethod::of_kind(a.fusion, a.fusion_weight_exponent);
+    if let FusionMethod::RobustAverage {
+        residual_scale,
+        rounds,
+        ..
+    } = &mut opts.fusion.method
+    {
+        *residual_scale = a.fusion_residual_scale;
+        *rounds = a.fusion_rounds;
+    }
+    if let FusionMethod::MultiBand {
+        detail_exponent,
+        sigma_texels,
+        ..
+    } = &mut opts.fusion.method
+    {
+        *detail_exponent = a.fusion_detail_exponent;
+        *sigma_texels = a.fusion_band_sigma;
+    }
     opts.unseen.mode = a.unseen;
     let m = build_model(&a.case, &a.out, &opts)
         .with_context(|| format!("build {}", a.case.display()))?;

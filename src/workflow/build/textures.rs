@@ -8,6 +8,7 @@ use super::options::BuildOptions;
 use super::scene::BuildScene;
 use crate::shading::{FittedShading, ShadingKind};
 use crate::texture::fusion::fuse;
+use crate::texture::seams::SeamStats;
 use crate::texture::synthesis::SynthesisStats;
 use crate::Result;
 
@@ -25,6 +26,8 @@ pub struct FusedAlbedo {
     pub synthesis_seconds: f64,
     /// The per-channel factors of the colour balance.
     pub colour_balance: [f32; 3],
+    /// The seam measure of the fusion.
+    pub seams: SeamStats,
 }
 
 /// The textures of a model.
@@ -106,6 +109,7 @@ fn fuse_albedo(
         synthesis,
         synthesis_seconds,
         colour_balance,
+        seams: fused.stats.seams,
     })
 }
 

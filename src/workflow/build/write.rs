@@ -144,6 +144,7 @@ fn write_model_files(out_dir: &OutputDir, built: &BuiltModel) -> Result<ModelMan
         registration: built.registration.clone(),
         frame_selection: built.selection.clone(),
         unseen_walls: Some(unseen_walls(built, atlas.texel_mm)),
+        fusion_seams: Some(built.textures.albedo.seams),
         warnings: built.warnings.clone(),
         atlas_mean_l2_stretch: atlas.stats.mean_l2_stretch,
         atlas_utilisation: atlas.stats.utilisation,
