@@ -4,11 +4,11 @@
 //!
 //! ```sh
 //! cargo run --release --example register_rounds -- CASE WORK [rounds=3] [first=chroma|texture]
-//!     [start=DIR] [final=yes|no] [floor=F] [sigma=S] [huber=H] [gain=yes|no] [coarsest=L]
+//!     [start=DIR] [final=yes|no] [floor=F] [sigma=S] [huber=H] [gain=yes|no] [coarsest=L] [finest=L]
 //!     [chw=R,G,B]
 //! ```
 //! `start=CASE/truth` starts from the true poses (what a round does to them: its bias);
-//! `floor`, `sigma`, `huber`, `gain`, `coarsest`, `chw` set the per-frame registration's options.
+//! `floor`, `sigma`, `huber`, `gain`, `coarsest`, `finest`, `chw` set the per-frame registration's options.
 //! Each round writes `round_N/errors.csv`: per frame, the error of its own (`measured`) and of
 //! the smoothed pose against the truth, in the true camera's axes (mm, degrees).
 //! CASE is a phantom case with `truth/poses.json` (e.g. `bronchosim phantom --pose-noise-mm 1.5
@@ -130,6 +130,7 @@ fn main() -> anyhow::Result<()> {
             Some(("final", v)) => final_model = v == "yes",
             Some(("gain", v)) => frame_opts.estimate_gain = v == "yes",
             Some(("coarsest", v)) => frame_opts.coarsest_level = v.parse()?,
+            Some(("finest", v)) => frame_opts.finest_level = v.parse()?,
             Some(("chw", v)) => {
                 let w: Vec<f32> = v.split(',').map(|x| x.parse()).collect::<Result<_, _>>()?;
                 frame_opts.uniform_channel_weights = [w[0], w[1], w[2]];
