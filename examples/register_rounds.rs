@@ -70,6 +70,28 @@ fn score(est: &[Affine], truth: &[Affine]) -> String {
     )
 }
 
+/// Per-frame errors (true camera axes, mm and degrees) of the frames' own and the smoothed
+/// poses, as CSV.
+fn write_errors(
+    path: &Path,
+    measured: &[Affine],
+    smoothed: &[Affine],
+    truth: &[Affine],
+) -> anyhow::Result<()> {
+    let mut csv = String::from("frame,kind,x,y,z,rx,ry,rz\n");
+    for (kind, set) in [("measured", measured), ("smoothed", smoothed)] {
+        for (i, (a, b)) in set.iter().zip(truth).enumerate() {
+            let (t, r) = pose_error_axes(a, b);
+            csv += &format!(
+                "{i},{kind},{},{},{},{},{},{}\n",
+                t[0], t[1], t[2], r[0], r[1], r[2]
+            );
+        }
+    }
+    std::fs::write(path, csv)?;
+    Ok(())
+}
+
 /// A copy of the case at `to` with its own poses.json (everything else hard-linked).
 fn case_copy(from: &Path, to: &Path, poses: &[PoseEntry]) -> anyhow::Result<()> {
     std::fs::create_dir_all(to.join("frames"))?;
@@ -212,24 +234,8 @@ fn main() -> anyhow::Result<()> {
             &VideoOptions::default(),
         )?;
         let t_reg = t.elapsed().as_secs_f64();
-        // Per-frame errors (camera axes) of the frames' own and the smoothed poses.
-        let mut csv = String::from("frame,kind,x,y,z,rx,ry,rz\n");
-        for (kind, set) in [
-            ("measured", v.measured.clone()),
-            (
-                "smoothed",
-                v.frames.iter().map(|f| f.pose).collect::<Vec<_>>(),
-            ),
-        ] {
-            for (i, (a, b)) in set.iter().zip(&truth).enumerate() {
-                let (t, r) = pose_error_axes(a, b);
-                csv += &format!(
-                    "{i},{kind},{},{},{},{},{},{}\n",
-                    t[0], t[1], t[2], r[0], r[1], r[2]
-                );
-            }
-        }
-        std::fs::write(dir.join("errors.csv"), csv)?;
+        let smoothed: Vec<Affine> = v.frames.iter().map(|f| f.pose).collect();
+        write_errors(&dir.join("errors.csv"), &v.measured, &smoothed, &truth)?;
         // Over-relaxation of the smooth part of the corrections (experiment): the texture
         // follows the poses, so a round removes only a fraction of a smooth drift.
         let deltas: Vec<_> = v
