@@ -63,8 +63,9 @@ pub struct CalibratedOptions {
     /// chooses with `--interreflection`).
     pub gathered: bool,
     /// The specular term `g_f k_c spec(gamma) s / z^2` of the light's colour
-    /// ([`super::specular`]): a GGX lobe whose alpha the first fit chooses, or none (rho then
-    /// holds the highlights). Default: the lobe (BENCHMARKS.md, "Specular term").
+    /// ([`super::specular`]): a GGX lobe whose alpha the first fit chooses, of a white light
+    /// or with its colour fitted, or none (rho then holds the highlights). Default: white
+    /// (BENCHMARKS.md, "Specular term (issue 18 item 3)").
     pub specular: SpecularMode,
     /// Frame whose gain is fixed to 1. Default 0.
     pub reference_frame: usize,
@@ -101,7 +102,7 @@ impl Default for CalibratedOptions {
             ambient: false,
             interreflection: true,
             gathered: false,
-            specular: SpecularMode::Lobe,
+            specular: SpecularMode::White,
             reference_frame: 0,
             max_alternations: 40,
             tolerance: 1e-10,
@@ -181,7 +182,7 @@ fn check_inputs(samples: &PooledSamples, density: &[f32], opts: &CalibratedOptio
         + opts.s_degree
         + f * if opts.ambient { 4 } else { 1 }
         + if opts.interreflection { 3 } else { 0 }
-        + if opts.specular == SpecularMode::Lobe {
+        + if opts.specular != SpecularMode::None {
             3
         } else {
             0
@@ -256,6 +257,11 @@ fn fit_inner(
         interreflection: opts.interreflection,
         gathered: opts.gathered,
         specular: None,
+        spec_colours: if opts.specular == SpecularMode::Coloured {
+            3
+        } else {
+            1
+        },
     };
     let cos_edge = match init {
         Some(m) => m.cos_theta_edge,
@@ -268,7 +274,7 @@ fn fit_inner(
             _ => density[i],
         })
         .collect();
-    if opts.specular == SpecularMode::Lobe {
+    if opts.specular != SpecularMode::None {
         // The lobe's width is kept from the light the refits start from.
         lay.specular = Some(match init.and_then(|m| m.specular) {
             Some(s) => s.alpha,
@@ -371,7 +377,13 @@ pub(super) fn params_of(lay: &Layout, m: &CalibratedModel) -> Result<Vec<f64>> {
         p[lay.q_off()..lay.q_off() + 3].copy_from_slice(&g.k);
     }
     if let (Some(_), Some(sp)) = (lay.specular, &m.specular) {
-        p[lay.p_off()..lay.p_off() + 3].copy_from_slice(&sp.k);
+        for c in 0..lay.spec_colours {
+            // A white light starts from the mean of a coloured one's.
+            p[lay.p_off() + c] = match lay.spec_colours {
+                3 => sp.k[c],
+                _ => sp.k.iter().sum::<f64>() / 3.0,
+            };
+        }
     }
     if lay.ambient {
         for (f, a) in m.ambient.as_ref().into_iter().flatten().enumerate() {
@@ -422,7 +434,7 @@ fn model_of(
         specular: lay
             .specular
             .map(|alpha| SpecularLobe {
-                k: std::array::from_fn(|c| p[lay.p_off() + c]),
+                k: std::array::from_fn(|c| p[lay.k_idx(c)]),
                 alpha,
             })
             .filter(|s| s.k.iter().any(|&k| k > 0.0)),

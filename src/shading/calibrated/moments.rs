@@ -37,8 +37,10 @@ pub(crate) struct Layout {
     pub gathered: bool,
     /// The specular lobe's GGX alpha when the model has the specular term: features
     /// `spec(gamma) B(t) / z^2` (not multiplied by the albedo) with coefficients `g_f k_c s`
-    /// (k_c: 3 parameters, last).
+    /// (k_c: the last parameters).
     pub specular: Option<f64>,
+    /// Parameters of the specular colour: 1 (one k for every channel: a white light) or 3.
+    pub spec_colours: usize,
 }
 
 impl Layout {
@@ -85,7 +87,16 @@ impl Layout {
     }
     /// Length of the parameter vector.
     pub fn len(&self) -> usize {
-        self.p_off() + if self.specular.is_some() { 3 } else { 0 }
+        self.p_off()
+            + if self.specular.is_some() {
+                self.spec_colours
+            } else {
+                0
+            }
+    }
+    /// Index of channel c's specular colour k_c (one index for every channel when white).
+    pub fn k_idx(&self, c: usize) -> usize {
+        self.p_off() + c.min(self.spec_colours.max(1) - 1)
     }
 }
 
@@ -286,7 +297,7 @@ pub(crate) fn y_of(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize) -> D
         y[d + 1] = gathered_of(lay, p, f, c);
     }
     if lay.specular.is_some() {
-        let kc = gf * p[lay.p_off() + c];
+        let kc = gf * p[lay.k_idx(c)];
         let sp = lay.spec_feature();
         for k in 0..lay.ns {
             let e = if k == 0 { 1.0 } else { p[lay.e_off() + k - 1] };
@@ -343,7 +354,7 @@ pub(crate) fn normal_equations(
                 idx.push(lay.q_off() + c);
             }
             if lay.specular.is_some() {
-                idx.push(lay.p_off() + c);
+                idx.push(lay.k_idx(c));
             }
             let mut jac = DMatrix::zeros(d + lay.extra(), idx.len());
             // Columns: rho (nr), s_1.. (ns - 1), g_f, then the optional ones in idx's order.
@@ -377,7 +388,7 @@ pub(crate) fn normal_equations(
                 jac[(d + 1, col_q)] = gf;
             }
             if lay.specular.is_some() {
-                let kc = p[lay.p_off() + c];
+                let kc = p[lay.k_idx(c)];
                 let sp = lay.spec_feature();
                 for k in 0..lay.ns {
                     let e = if k == 0 { 1.0 } else { p[lay.e_off() + k - 1] };

@@ -35,7 +35,7 @@ fn predict(
             amb += super::moments::gathered_of(lay, p, f, c) * alb * f64::from(e[c][i]);
         }
         if lay.specular.is_some() {
-            amb += spec * p[lay.p_off() + c];
+            amb += spec * p[lay.k_idx(c)];
         }
         k * alb * bernstein_eval(&p[lay.c_off(c)..lay.c_off(c) + lay.nr], gam) + amb
     })

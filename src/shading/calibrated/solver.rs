@@ -86,7 +86,7 @@ fn fix_gauge(lay: &Layout, p: &mut [f64], reference: usize) {
         }
     }
     if lay.specular.is_some() {
-        for c in 0..3 {
+        for c in 0..lay.spec_colours {
             p[lay.p_off() + c] *= k;
         }
     }
@@ -151,7 +151,7 @@ pub(super) fn solve(
         }
         if lay.specular.is_some() {
             let (h, g, _) = normal_equations(lay, m, &p);
-            let idx: Vec<usize> = (0..3).map(|c| lay.p_off() + c).collect();
+            let idx: Vec<usize> = (0..lay.spec_colours).map(|c| lay.p_off() + c).collect();
             block_step(&mut p, &h, &g, &idx, &lbs(&idx));
         }
         fix_gauge(lay, &mut p, opts.reference_frame);

@@ -10,10 +10,12 @@
 //!   and `n . h = gamma`: `D(gamma) G1(gamma)^2 / (4 gamma)` (the BRDF times the cosine of
 //!   incidence; Fresnel is constant near normal incidence), normalised to 1 at gamma = 1. One
 //!   shape parameter, alpha; the fit chooses it among [`ALPHA_CANDIDATES`] by its cost.
-//! - The colour `k_c` is fitted (3 values for the video), not tied to rho's: rho's colour is
-//!   the light's times the mean albedo (reddish), which is what a highlight must not carry; the
-//!   light's own colour is unknown (no white balance is assumed), and the highlights' unsaturated
-//!   skirts give it directly.
+//! - The colour `k_c` is not tied to rho's: rho's colour is the light's times the mean albedo
+//!   (reddish), which is what a highlight must not carry. By default it is white (one k for
+//!   the channels): endoscopes are white-balanced on a white target before use, so in the
+//!   camera's RGB the light is white, and a free colour lets the lobe stand in for diffuse
+//!   light the other terms miss (on the path-traced case it came out red, k = (27, 6, 8), at
+//!   the widest alpha). `--specular coloured` fits k_c per channel.
 
 use serde::{Deserialize, Serialize};
 
@@ -22,13 +24,16 @@ use serde::{Deserialize, Serialize};
 /// Beyond that the lobe is as wide as rho's cubic and the two cannot be told apart.
 pub const ALPHA_CANDIDATES: [f64; 7] = [0.04, 0.06, 0.09, 0.135, 0.2, 0.3, 0.46];
 
-/// Whether the calibrated light has a specular term.
+/// Whether the calibrated light has a specular term, and of which colour.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SpecularMode {
-    /// A GGX lobe of the light's colour, added to the diffuse light (alpha chosen by the fit).
+    /// A GGX lobe added to the diffuse light (alpha chosen by the fit) of a white light: one k
+    /// for the three channels (endoscopes are white-balanced on a white target before use).
     #[default]
-    Lobe,
+    White,
+    /// The same lobe with its colour k_c fitted per channel.
+    Coloured,
     /// No separate term: rho holds the highlights, multiplied by the albedo.
     None,
 }
