@@ -1,18 +1,17 @@
 //! The calibrated light model: one light for the whole video (DESIGN.md, "Beyond the paper").
 //!
-//! `I_f(pixel) = g_f * albedo(x) * rho_ch(gamma) * s(theta) / z^2 (+ a_f,ch)`:
-//! rho per colour channel is a Bernstein polynomial in gamma over [0, 1] (it holds the BRDF,
-//! the specular lobe included: with the light at the lens the lobe depends on gamma alone, and
-//! the mean albedo); s is the light's angular profile times the lens vignetting, a Bernstein
+//! `I_f(pixel) = g_f * (albedo(x) * rho_ch(gamma) + k_ch spec(gamma)) * s(theta) / z^2 (+ a_f,ch)`:
+//! rho per colour channel is a Bernstein polynomial in gamma over [0, 1] (it holds the diffuse
+//! BRDF and the mean albedo; with `--specular none` the specular lobe too: with the light at
+//! the lens the lobe depends on gamma alone); s is the light's angular profile times the lens vignetting, a Bernstein
 //! polynomial in cos(theta) shared by the channels with s = 1 on the optical axis; z is the
 //! absolute distance (mm, never normalised or clamped); g_f is the frame's auto-exposure gain
 //! (1 for the reference frame); a_f the inter-reflected light of frame f: by default
 //! `kappa_c · L_f`, three parameters for the video times the frame's mean observed luminance
 //! (see `calibrated_fit::CalibratedOptions::interreflection`), or free per frame (`--ambient`);
 //! or, with `--interreflection gathered`, `g_f alb(x) k_c E_c(x)` with E gathered from the
-//! mesh (`shading::indirect`); plus, unless `--specular none`, the highlight
-//! `g_f k_c spec(gamma) s(theta) / z^2` of the light's colour, not multiplied by the albedo
-//! ([`super::specular`]; rho then holds the diffuse light).
+//! mesh (`shading::indirect`). `k_ch spec(gamma)` is the highlight, of the light's colour and
+//! not multiplied by the albedo ([`super::specular`]; absent with `--specular none`).
 
 use crate::shading::frame_shading::LUMA;
 use serde::{Deserialize, Serialize};
