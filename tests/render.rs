@@ -494,6 +494,7 @@ fn calibrated_new_views_reflect_their_own_light() {
         frame_light: Some(vec![0.0]),
         gathered: None,
         frame_indirect: None,
+        specular: None,
         auto_exposure: None,
         rms_residual: [0.0; 3],
         samples_used: 0,

@@ -2,8 +2,8 @@
 //! and what fusion weighs with.
 //!
 //! - paper: the frame's own `Psi_p(gamma, z)` (Chung et al. 2004, eq. 2–5);
-//! - calibrated: `g_f · rho(gamma) · s(theta) / z² (+ a_f)` of the one light fitted to the
-//!   whole video (DESIGN.md "Beyond the paper").
+//! - calibrated: `g_f · rho(gamma) · s(theta) / z²` of the one light fitted to the whole
+//!   video (DESIGN.md "Beyond the paper"), plus its specular term and `a_f` as an offset.
 
 use super::calibrated::CalibratedModel;
 use super::paper::PsiModel;
@@ -43,7 +43,8 @@ pub enum FrameShading<'a> {
 pub struct Shade {
     /// Multiplies the relative albedo.
     pub scale: [f64; 3],
-    /// Added light that does not depend on the albedo (inter-reflection; 0 for Psi).
+    /// Added light that does not depend on the albedo (inter-reflection and the calibrated
+    /// light's specular term; 0 for Psi).
     pub offset: [f64; 3],
 }
 
@@ -66,9 +67,11 @@ impl FrameShading<'_> {
             },
             FrameShading::Calibrated { model, frame } => {
                 let g = model.gains.get(*frame).copied().unwrap_or(f64::NAN);
+                let a = model.ambient_of(*frame);
+                let sp = model.specular_rgb(gamma, cos_theta, z, g);
                 Shade {
                     scale: model.eval_rgb(gamma, cos_theta, z, g),
-                    offset: model.ambient_of(*frame),
+                    offset: std::array::from_fn(|c| a[c] + sp[c]),
                 }
             }
         }
@@ -179,6 +182,7 @@ mod tests {
             frame_light: None,
             gathered: None,
             frame_indirect: None,
+            specular: None,
             auto_exposure: None,
             rms_residual: [0.0; 3],
             samples_used: 0,

@@ -2,8 +2,8 @@
 //!
 //! - paper: the Psi of the nearest (or k nearest) fitted viewpoints, evaluated with the new
 //!   view's gamma and z (the light moves with the camera);
-//! - calibrated: `rho(gamma) s(theta) / z²` of the one light, at the reference gain, plus the
-//!   inter-reflection of the view's own light.
+//! - calibrated: `rho(gamma) s(theta) / z²` of the one light, at the reference gain, plus its
+//!   specular term and the inter-reflection of the view's own light.
 
 use super::calibrated::CalibratedModel;
 use super::frame_shading::masked_luminance_sum;
@@ -32,8 +32,13 @@ impl ViewShader<'_> {
         match self {
             ViewShader::Paper(b) => (b.eval_rgb(gamma, z), [0.0; 3]),
             ViewShader::Calibrated { model, ambient } => {
-                let s = model.eval_rgb(gamma as f64, cos_theta as f64, z as f64, 1.0);
-                (s.map(|v| v as f32), *ambient)
+                let (g, ct, z) = (f64::from(gamma), f64::from(cos_theta), f64::from(z));
+                let s = model.eval_rgb(g, ct, z, 1.0);
+                let sp = model.specular_rgb(g, ct, z, 1.0);
+                (
+                    s.map(|v| v as f32),
+                    std::array::from_fn(|c| ambient[c] + sp[c] as f32),
+                )
             }
         }
     }

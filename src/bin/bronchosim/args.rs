@@ -188,6 +188,11 @@ pub struct BuildArgs {
     /// observed light, 3 parameters for the whole video; see BENCHMARKS.md).
     #[arg(long)]
     pub no_interreflection: bool,
+    /// The calibrated light's highlights: `white` (a GGX lobe of a white light added to the
+    /// diffuse light, not multiplied by the albedo), `coloured` (the lobe's colour fitted) or
+    /// `none` (rho holds them).
+    #[arg(long, value_enum, default_value_t = build_defaults().calibrated.specular)]
+    pub specular: bronchosim::shading::calibrated::SpecularMode,
     /// Inter-reflection: `uniform` (kappa times each frame's mean light) or `gathered` (the
     /// light once reflected by the wall, gathered from the mesh at every surface point).
     #[arg(long, value_enum, default_value_t = build_defaults().interreflection)]

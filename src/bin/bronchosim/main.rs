@@ -96,6 +96,7 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
     opts.calibrated.ambient = a.ambient;
     opts.calibrated.interreflection = !a.no_interreflection;
     opts.interreflection = a.interreflection;
+    opts.calibrated.specular = a.specular;
     opts.gather_nodes = a.gather_nodes;
     opts.gather_rays = a.gather_rays;
     opts.gather_visibility = a.gather_visibility;

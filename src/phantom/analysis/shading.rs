@@ -218,9 +218,12 @@ impl FrameEvaluator<'_> {
                 ShadingLaw::Fitted(m) => {
                     // Any ambient term reflects off the local albedo (inter-reflection).
                     let s = m.eval_rgb(cos_g, cos_t, z, gain);
+                    let sp = m.specular_rgb(cos_g, cos_t, z, gain);
                     let a = m.ambient_of(f);
                     let to_gain = gain / m.gains[f];
-                    luminance([0, 1, 2].map(|c| (s[c] + a[c] * to_gain) * albedo[k][c] as f64))
+                    luminance(
+                        [0, 1, 2].map(|c| (s[c] + a[c] * to_gain) * albedo[k][c] as f64 + sp[c]),
+                    )
                 }
                 ShadingLaw::Phantom => {
                     let d = direct[k];

@@ -27,6 +27,8 @@ use super::moments::{accumulate, cost, t_of, Layout};
 use super::residuals::{residual_rms, robust_weights};
 use super::samples::PooledSamples;
 use super::solver::{bounds, clamp_to, min_positive, rho_scale, solve};
+use super::specular::{SpecularLobe, SpecularMode};
+use super::specular_fit::choose_alpha;
 use crate::shading::error::check_weights;
 use crate::shading::indirect::GatheredInterreflection;
 use crate::shading::robust::Robust;
@@ -60,6 +62,11 @@ pub struct CalibratedOptions {
     /// set), beside `kappa_c L_f` when `interreflection` is also set. Default false (the build
     /// chooses with `--interreflection`).
     pub gathered: bool,
+    /// The specular term `g_f k_c spec(gamma) s / z^2` of the light's colour
+    /// ([`super::specular`]): a GGX lobe whose alpha the first fit chooses, of a white light
+    /// or with its colour fitted, or none (rho then holds the highlights). Default: white
+    /// (BENCHMARKS.md, "Specular term (issue 18 item 3)").
+    pub specular: SpecularMode,
     /// Frame whose gain is fixed to 1. Default 0.
     pub reference_frame: usize,
     /// Most alternation rounds (each: rho, s, gains). Default 40.
@@ -95,6 +102,7 @@ impl Default for CalibratedOptions {
             ambient: false,
             interreflection: true,
             gathered: false,
+            specular: SpecularMode::White,
             reference_frame: 0,
             max_alternations: 40,
             tolerance: 1e-10,
@@ -173,7 +181,12 @@ fn check_inputs(samples: &PooledSamples, density: &[f32], opts: &CalibratedOptio
     let need = 3 * (opts.rho_degree + 1)
         + opts.s_degree
         + f * if opts.ambient { 4 } else { 1 }
-        + if opts.interreflection { 3 } else { 0 };
+        + if opts.interreflection { 3 } else { 0 }
+        + if opts.specular != SpecularMode::None {
+            3
+        } else {
+            0
+        };
     if opts.gathered {
         let ok = samples
             .indirect
@@ -236,13 +249,19 @@ fn fit_inner(
     opts: &CalibratedOptions,
 ) -> Result<CalibratedFit> {
     check_inputs(samples, density, opts)?;
-    let lay = Layout {
+    let mut lay = Layout {
         nr: opts.rho_degree + 1,
         ns: opts.s_degree + 1,
         frames: samples.frames(),
         ambient: opts.ambient,
         interreflection: opts.interreflection,
         gathered: opts.gathered,
+        specular: None,
+        spec_colours: if opts.specular == SpecularMode::Coloured {
+            3
+        } else {
+            1
+        },
     };
     let cos_edge = match init {
         Some(m) => m.cos_theta_edge,
@@ -255,6 +274,13 @@ fn fit_inner(
             _ => density[i],
         })
         .collect();
+    if opts.specular != SpecularMode::None {
+        // The lobe's width is kept from the light the refits start from.
+        lay.specular = Some(match init.and_then(|m| m.specular) {
+            Some(s) => s.alpha,
+            None => choose_alpha(samples, &t, &base, albedo, lay, init, opts)?,
+        });
+    }
     let mut p = match init {
         Some(m) => params_of(&lay, m)?,
         None => initial(&lay),
@@ -264,7 +290,7 @@ fn fit_inner(
     let mut constrained = false;
     for round in 0..=opts.max_irls_iterations {
         let m = accumulate(samples, &t, &w, albedo, &lay);
-        let scale = rho_scale(&m);
+        let scale = rho_scale(&lay, &m);
         let prev = p.clone();
         if !constrained {
             p = solve(&lay, &m, p, opts, None, &mut rep);
@@ -316,8 +342,8 @@ fn fit_inner(
     })
 }
 
-/// rho ≡ 0, s ≡ 1, g ≡ 1, a ≡ 0.
-fn initial(lay: &Layout) -> Vec<f64> {
+/// rho ≡ 0, s ≡ 1, g ≡ 1, a ≡ 0, k ≡ 0.
+pub(super) fn initial(lay: &Layout) -> Vec<f64> {
     let mut p = vec![0.0; lay.len()];
     for k in 1..lay.ns {
         p[lay.e_off() + k - 1] = 1.0;
@@ -328,7 +354,7 @@ fn initial(lay: &Layout) -> Vec<f64> {
     p
 }
 
-fn params_of(lay: &Layout, m: &CalibratedModel) -> Result<Vec<f64>> {
+pub(super) fn params_of(lay: &Layout, m: &CalibratedModel) -> Result<Vec<f64>> {
     if m.rho.iter().any(|r| r.len() != lay.nr)
         || m.s.len() != lay.ns
         || m.gains.len() != lay.frames
@@ -349,6 +375,15 @@ fn params_of(lay: &Layout, m: &CalibratedModel) -> Result<Vec<f64>> {
     p[lay.g_off()..lay.g_off() + lay.frames].copy_from_slice(&m.gains);
     if let (true, Some(g)) = (lay.gathered, &m.gathered) {
         p[lay.q_off()..lay.q_off() + 3].copy_from_slice(&g.k);
+    }
+    if let (Some(_), Some(sp)) = (lay.specular, &m.specular) {
+        for c in 0..lay.spec_colours {
+            // A white light starts from the mean of a coloured one's.
+            p[lay.p_off() + c] = match lay.spec_colours {
+                3 => sp.k[c],
+                _ => sp.k.iter().sum::<f64>() / 3.0,
+            };
+        }
     }
     if lay.ambient {
         for (f, a) in m.ambient.as_ref().into_iter().flatten().enumerate() {
@@ -395,6 +430,14 @@ fn model_of(
             visibility: false,
         }),
         frame_indirect: None,
+        // No term when the fit found no highlight (every k_c at its bound 0).
+        specular: lay
+            .specular
+            .map(|alpha| SpecularLobe {
+                k: std::array::from_fn(|c| p[lay.k_idx(c)]),
+                alpha,
+            })
+            .filter(|s| s.k.iter().any(|&k| k > 0.0)),
         auto_exposure: None,
         rms_residual: rms,
         samples_used: n,

@@ -1,5 +1,5 @@
 //! One calibrated light for the whole video (DESIGN.md, "Beyond the paper"):
-//! `I_f = g_f · albedo · rho(gamma) · s(theta) / z² (+ inter-reflection)`.
+//! `I_f = g_f · (albedo · rho(gamma) + k · spec(gamma)) · s(theta) / z² (+ inter-reflection)`.
 //!
 //! [`pool_frames`] keeps a subsample of every frame's model-obeying pixels,
 //! [`density_weights_3d`] weighs them over (gamma, z, theta), [`fit_calibrated`] fits rho, s,
@@ -17,6 +17,8 @@ pub mod predict;
 mod residuals;
 pub mod samples;
 mod solver;
+pub mod specular;
+mod specular_fit;
 
 pub use chroma_albedo::refit_with_chroma_albedo;
 pub use exposure::AutoExposure;
@@ -26,3 +28,4 @@ pub use fit::{
 pub use model::CalibratedModel;
 pub use predict::{cos_theta_of, predict_frame, predict_pixels, Albedo};
 pub use samples::{density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples};
+pub use specular::{SpecularLobe, SpecularMode};

@@ -1,16 +1,17 @@
 //! The calibrated light model: one light for the whole video (DESIGN.md, "Beyond the paper").
 //!
-//! `I_f(pixel) = g_f * albedo(x) * rho_ch(gamma) * s(theta) / z^2 (+ a_f,ch)`:
-//! rho per colour channel is a Bernstein polynomial in gamma over [0, 1] (it holds the BRDF,
-//! the specular lobe included: with the light at the lens the lobe depends on gamma alone, and
-//! the mean albedo); s is the light's angular profile times the lens vignetting, a Bernstein
+//! `I_f(pixel) = g_f * (albedo(x) * rho_ch(gamma) + k_ch spec(gamma)) * s(theta) / z^2 (+ a_f,ch)`:
+//! rho per colour channel is a Bernstein polynomial in gamma over [0, 1] (it holds the diffuse
+//! BRDF and the mean albedo; with `--specular none` the specular lobe too: with the light at
+//! the lens the lobe depends on gamma alone); s is the light's angular profile times the lens vignetting, a Bernstein
 //! polynomial in cos(theta) shared by the channels with s = 1 on the optical axis; z is the
 //! absolute distance (mm, never normalised or clamped); g_f is the frame's auto-exposure gain
 //! (1 for the reference frame); a_f the inter-reflected light of frame f: by default
 //! `kappa_c · L_f`, three parameters for the video times the frame's mean observed luminance
 //! (see `calibrated_fit::CalibratedOptions::interreflection`), or free per frame (`--ambient`);
 //! or, with `--interreflection gathered`, `g_f alb(x) k_c E_c(x)` with E gathered from the
-//! mesh (`shading::indirect`).
+//! mesh (`shading::indirect`). `k_ch spec(gamma)` is the highlight, of the light's colour and
+//! not multiplied by the albedo ([`super::specular`]; absent with `--specular none`).
 
 use crate::shading::frame_shading::LUMA;
 use serde::{Deserialize, Serialize};
@@ -18,6 +19,7 @@ use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
 use super::exposure::AutoExposure;
+use super::specular::SpecularLobe;
 use crate::shading::bernstein::bernstein_eval;
 use crate::shading::indirect::{GatheredInterreflection, IndirectField};
 
@@ -59,6 +61,10 @@ pub struct CalibratedModel {
     /// E of every fitted frame (build time only, not saved: new views gather their own).
     #[serde(skip)]
     pub frame_indirect: Option<Arc<Vec<IndirectField>>>,
+    /// The specular term `g_f k_c spec(gamma) s(theta) / z^2` (not multiplied by the albedo);
+    /// absent in models built before it, with `--specular none`, or when the fit found none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub specular: Option<SpecularLobe>,
     /// The scope's auto-exposure learnt from the gains (see [`AutoExposure`]); absent in models
     /// built before it was fitted, or when the video's frames did not vary in brightness.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -86,6 +92,7 @@ impl CalibratedModel {
             frame_light: None,
             gathered: None,
             frame_indirect: None,
+            specular: None,
             auto_exposure: None,
             rms_residual: [0.0; 3],
             samples_used: 0,
@@ -130,7 +137,19 @@ impl CalibratedModel {
         std::array::from_fn(|ch| k * self.rho(ch, gamma))
     }
 
-    /// The shading of fitted frame `frame` in channel `ch`: its gain, and its ambient term if any.
+    /// The specular term `gain k_c spec(gamma) s(theta) / z^2` per channel (linear intensity;
+    /// zeros without one): light added to the albedo-scaled [`eval_rgb`](Self::eval_rgb).
+    #[inline]
+    pub fn specular_rgb(&self, gamma: f64, cos_theta: f64, z: f64, gain: f64) -> [f64; 3] {
+        let Some(sp) = &self.specular else {
+            return [0.0; 3];
+        };
+        let k = gain * self.s(cos_theta) / (z * z);
+        sp.rgb(gamma).map(|v| k * v)
+    }
+
+    /// The shading of fitted frame `frame` in channel `ch` for the mean albedo: its gain, its
+    /// specular term and its ambient term if any.
     /// `None` when `frame` was not fitted.
     pub fn eval_frame(
         &self,
@@ -141,7 +160,11 @@ impl CalibratedModel {
         frame: usize,
     ) -> Option<f64> {
         let g = *self.gains.get(frame)?;
-        Some(self.eval(ch, gamma, cos_theta, z, g) + self.ambient_of(frame)[ch])
+        Some(
+            self.eval(ch, gamma, cos_theta, z, g)
+                + self.specular_rgb(gamma, cos_theta, z, g)[ch]
+                + self.ambient_of(frame)[ch],
+        )
     }
 
     /// a_f of fitted frame `frame` (zeros without an ambient term or for an unknown frame).
@@ -201,7 +224,7 @@ impl CalibratedModel {
         k.map(|k| k * light)
     }
     /// The albedo (relative to the mean albedo folded into rho) that de-lights `value` (linear
-    /// intensity) seen in fitted frame `frame`: `(value - a_f) / (g_f rho s / z^2)`.
+    /// intensity) seen in fitted frame `frame`: `(value - a_f - specular) / (g_f rho s / z^2)`.
     /// `None` for an unknown frame or a non-positive shading.
     pub fn delight(
         &self,
@@ -214,7 +237,8 @@ impl CalibratedModel {
     ) -> Option<f64> {
         let g = *self.gains.get(frame)?;
         let shade = self.eval(ch, gamma, cos_theta, z, g);
-        (shade > 0.0).then(|| (value - self.ambient_of(frame)[ch]) / shade)
+        let spec = self.specular_rgb(gamma, cos_theta, z, g)[ch];
+        (shade > 0.0).then(|| (value - self.ambient_of(frame)[ch] - spec) / shade)
     }
 
     /// Check the invariants a loaded model must hold; the message says which field is wrong.
@@ -272,6 +296,9 @@ impl CalibratedModel {
         if let Some(g) = &self.gathered {
             g.validate()?;
         }
+        if let Some(sp) = &self.specular {
+            sp.validate()?;
+        }
         if self.interreflection.is_some() != self.frame_light.is_some() {
             return Err(
                 "calibrated.interreflection and calibrated.frame_light go together".to_string(),
@@ -298,6 +325,7 @@ mod tests {
             frame_light: None,
             gathered: None,
             frame_indirect: None,
+            specular: None,
             auto_exposure: None,
             rms_residual: [0.0; 3],
             samples_used: 0,
@@ -380,6 +408,7 @@ mod tests {
             frame_light: Some(light.to_vec()),
             gathered: None,
             frame_indirect: None,
+            specular: None,
             auto_exposure: None,
             rms_residual: [0.0; 3],
             samples_used: 0,

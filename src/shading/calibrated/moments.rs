@@ -12,6 +12,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::samples::PooledSamples;
+use super::specular::lobe;
 use crate::shading::bernstein::basis_into;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -34,6 +35,12 @@ pub(crate) struct Layout {
     /// `alb_c E_c` per sample (E: [`PooledSamples::indirect`]) with coefficient `g_f k_c`
     /// (k_c: 3 parameters after kappa).
     pub gathered: bool,
+    /// The specular lobe's GGX alpha when the model has the specular term: features
+    /// `spec(gamma) B(t) / z^2` (not multiplied by the albedo) with coefficients `g_f k_c s`
+    /// (k_c: the last parameters).
+    pub specular: Option<f64>,
+    /// Parameters of the specular colour: 1 (one k for every channel: a white light) or 3.
+    pub spec_colours: usize,
 }
 
 impl Layout {
@@ -65,14 +72,31 @@ impl Layout {
     pub fn q_off(&self) -> usize {
         self.k_off() + if self.interreflection { 3 } else { 0 }
     }
+    /// Offset of the specular colour k (3 values, one per channel).
+    pub fn p_off(&self) -> usize {
+        self.q_off() + if self.gathered { 3 } else { 0 }
+    }
     /// Features after the shading ones: 1 (the light that does not depend on the surface),
-    /// and the gathered light when in the model.
+    /// the gathered light when in the model, then the specular ones (`ns`).
     pub fn extra(&self) -> usize {
-        1 + usize::from(self.gathered)
+        1 + usize::from(self.gathered) + if self.specular.is_some() { self.ns } else { 0 }
+    }
+    /// Index of the first specular feature.
+    pub fn spec_feature(&self) -> usize {
+        self.d() + 1 + usize::from(self.gathered)
     }
     /// Length of the parameter vector.
     pub fn len(&self) -> usize {
-        self.q_off() + if self.gathered { 3 } else { 0 }
+        self.p_off()
+            + if self.specular.is_some() {
+                self.spec_colours
+            } else {
+                0
+            }
+    }
+    /// Index of channel c's specular colour k_c (one index for every channel when white).
+    pub fn k_idx(&self, c: usize) -> usize {
+        self.p_off() + c.min(self.spec_colours.max(1) - 1)
     }
 }
 
@@ -136,6 +160,7 @@ pub(crate) fn accumulate(
 ) -> Vec<FrameMoments> {
     let d = lay.d();
     let d1 = d + lay.extra();
+    let sp = lay.spec_feature();
     let nmat = if albedo.is_some() || lay.gathered {
         3
     } else {
@@ -158,15 +183,22 @@ pub(crate) fn accumulate(
                 if wi == 0.0 {
                     continue;
                 }
+                let (gam, z) = (f64::from(samples.gamma[i]), f64::from(samples.z[i]));
                 features(
                     lay,
-                    f64::from(samples.gamma[i]),
+                    gam,
                     f64::from(t[i]),
-                    f64::from(samples.z[i]),
+                    z,
                     &mut bg,
                     &mut bt,
                     &mut psi[..d],
                 );
+                if let Some(alpha) = lay.specular {
+                    let l = lobe(alpha, gam) / (z * z);
+                    for k in 0..lay.ns {
+                        psi[sp + k] = l * bt[k];
+                    }
+                }
                 for c in 0..3 {
                     let p = f64::from(samples.rgb[c][i]);
                     s[c] += wi * p * p;
@@ -186,6 +218,9 @@ pub(crate) fn accumulate(
                     if lay.gathered {
                         hc[d + 1] += wi * p * q;
                     }
+                    for k in sp..d1 {
+                        hc[k] += wi * p * psi[k];
+                    }
                     if c < nmat {
                         for k in 0..d {
                             psic[k] = alb * psi[k];
@@ -194,6 +229,7 @@ pub(crate) fn accumulate(
                         if lay.gathered {
                             psic[d + 1] = q;
                         }
+                        psic[sp..].copy_from_slice(&psi[sp..]);
                         let gm = &mut g[c];
                         for j in 0..d1 {
                             let a = wi * psic[j];
@@ -243,7 +279,8 @@ pub(crate) fn gathered_of(lay: &Layout, p: &[f64], f: usize, c: usize) -> f64 {
     p[lay.g_off() + f] * p[lay.q_off() + c]
 }
 
-/// The coefficient vector `y_fc = (g_f vec(rho_c s^T), ambient_fc)` from the parameters.
+/// The coefficient vector `y_fc = (g_f vec(rho_c s^T), ambient_fc, [g_f k_c gathered],
+/// [g_f k_c s])` from the parameters.
 pub(crate) fn y_of(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize) -> DVector<f64> {
     let d = lay.d();
     let mut y = DVector::zeros(d + lay.extra());
@@ -258,6 +295,14 @@ pub(crate) fn y_of(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize) -> D
     y[d] = ambient_of(lay, p, light, f, c);
     if lay.gathered {
         y[d + 1] = gathered_of(lay, p, f, c);
+    }
+    if lay.specular.is_some() {
+        let kc = gf * p[lay.k_idx(c)];
+        let sp = lay.spec_feature();
+        for k in 0..lay.ns {
+            let e = if k == 0 { 1.0 } else { p[lay.e_off() + k - 1] };
+            y[sp + k] = kc * e;
+        }
     }
     y
 }
@@ -308,7 +353,18 @@ pub(crate) fn normal_equations(
             if lay.gathered {
                 idx.push(lay.q_off() + c);
             }
+            if lay.specular.is_some() {
+                idx.push(lay.k_idx(c));
+            }
             let mut jac = DMatrix::zeros(d + lay.extra(), idx.len());
+            // Columns: rho (nr), s_1.. (ns - 1), g_f, then the optional ones in idx's order.
+            let col_g = lay.nr + lay.ns - 1;
+            let mut next = col_g + 1 + usize::from(lay.ambient);
+            let col_kappa = next;
+            next += usize::from(lay.interreflection);
+            let col_q = next;
+            next += usize::from(lay.gathered);
+            let col_k = next;
             let rho = &p[lay.c_off(c)..lay.c_off(c) + lay.nr];
             for j in 0..lay.nr {
                 for k in 0..lay.ns {
@@ -324,13 +380,24 @@ pub(crate) fn normal_equations(
             if lay.ambient {
                 jac[(d, lay.nr + lay.ns)] = 1.0;
             }
-            let last = idx.len() - 1;
             if lay.interreflection {
-                jac[(d, last - usize::from(lay.gathered))] = fm.light;
+                jac[(d, col_kappa)] = fm.light;
             }
             if lay.gathered {
-                jac[(d + 1, lay.nr + lay.ns - 1)] = p[lay.q_off() + c];
-                jac[(d + 1, last)] = gf;
+                jac[(d + 1, col_g)] = p[lay.q_off() + c];
+                jac[(d + 1, col_q)] = gf;
+            }
+            if lay.specular.is_some() {
+                let kc = p[lay.k_idx(c)];
+                let sp = lay.spec_feature();
+                for k in 0..lay.ns {
+                    let e = if k == 0 { 1.0 } else { p[lay.e_off() + k - 1] };
+                    jac[(sp + k, col_k)] = gf * e;
+                    jac[(sp + k, col_g)] = kc * e;
+                    if k > 0 {
+                        jac[(sp + k, lay.nr + k - 1)] = gf * kc;
+                    }
+                }
             }
             let gj = gm * &jac;
             let hl = jac.transpose() * gj;

@@ -23,7 +23,8 @@ pub fn cos_theta_of(rays: &RayTable) -> Vec<f32> {
     rays.dirs.iter().map(|d| d[2]).collect()
 }
 
-/// Linear RGB (interleaved) of a view: `gain * albedo * rho(gamma) s(theta) / z^2 + ambient`,
+/// Linear RGB (interleaved) of a view:
+/// `gain * (albedo * rho(gamma) + k spec(gamma)) s(theta) / z^2 + ambient`,
 /// per pixel; 0 where there is no hit (`z` not finite or <= 0). For a new view use
 /// `gain = 1` (the reference gain) and `model.new_view_ambient()`.
 pub fn predict_pixels(
@@ -45,18 +46,15 @@ pub fn predict_pixels(
             if !(zi.is_finite() && zi > 0.0) {
                 return;
             }
-            let v = model.eval_rgb(
-                f64::from(gamma[i]).clamp(0.0, 1.0),
-                f64::from(cos_theta[i]),
-                zi,
-                gain,
-            );
+            let (g, ct) = (f64::from(gamma[i]).clamp(0.0, 1.0), f64::from(cos_theta[i]));
+            let v = model.eval_rgb(g, ct, zi, gain);
+            let sp = model.specular_rgb(g, ct, zi, gain);
             for c in 0..3 {
                 let a = match albedo {
                     Albedo::Uniform => 1.0,
                     Albedo::PerPixel(a) => f64::from(a[3 * i + c]),
                 };
-                px[c] = (a * v[c] + ambient[c]) as f32;
+                px[c] = (a * v[c] + sp[c] + ambient[c]) as f32;
             }
         });
     out

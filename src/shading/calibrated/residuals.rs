@@ -7,6 +7,7 @@
 use super::fit::CalibratedOptions;
 use super::moments::Layout;
 use super::samples::PooledSamples;
+use super::specular::lobe;
 use crate::shading::bernstein::bernstein_eval;
 use rayon::prelude::*;
 
@@ -25,12 +26,16 @@ fn predict(
     let z = f64::from(samples.z[i]);
     let gam = f64::from(samples.gamma[i]);
     let k = p[lay.g_off() + f] * bernstein_eval(s_coeffs, f64::from(t[i])) / (z * z);
+    let spec = lay.specular.map_or(0.0, |alpha| k * lobe(alpha, gam));
     std::array::from_fn(|c| {
         let alb = albedo.map_or(1.0, |a| f64::from(a[c][i]));
         let light = samples.frame_light.get(f).copied().unwrap_or(0.0);
         let mut amb = super::moments::ambient_of(lay, p, light, f, c);
         if let (true, Some(e)) = (lay.gathered, &samples.indirect) {
             amb += super::moments::gathered_of(lay, p, f, c) * alb * f64::from(e[c][i]);
+        }
+        if lay.specular.is_some() {
+            amb += spec * p[lay.k_idx(c)];
         }
         k * alb * bernstein_eval(&p[lay.c_off(c)..lay.c_off(c) + lay.nr], gam) + amb
     })

@@ -12,11 +12,13 @@ use crate::shading::bernstein::bernstein_eval;
 use crate::shading::solve::solve_box;
 use nalgebra::{DMatrix, DVector};
 
-/// A typical intensity x mm² (sets the lower bound of the constrained rho coefficients).
-pub(super) fn rho_scale(m: &[FrameMoments]) -> f64 {
+/// A typical intensity x mm² (sets the lower bound of the constrained rho coefficients):
+/// the RMS green intensity (`G[d, d]` is the weight sum: feature d is the constant 1).
+pub(super) fn rho_scale(lay: &Layout, m: &[FrameMoments]) -> f64 {
+    let d = lay.d();
     let (s, w): (f64, f64) = m
         .iter()
-        .map(|fm| (fm.s[1], fm.g(1)[(fm.h[1].len() - 1, fm.h[1].len() - 1)]))
+        .map(|fm| (fm.s[1], fm.g(1)[(d, d)]))
         .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
     (s / w.max(1e-300)).sqrt().max(1e-12) * 100.0
 }
@@ -76,10 +78,16 @@ fn fix_gauge(lay: &Layout, p: &mut [f64], reference: usize) {
             p[lay.c_off(c) + j] *= k;
         }
     }
-    // The gathered light was gathered with the old rho: its factor g_f k_c is kept.
+    // The gathered light was gathered with the old rho: its factor g_f k_c is kept; so is
+    // the specular term's g_f k_c.
     if lay.gathered {
         for c in 0..3 {
             p[lay.q_off() + c] *= k;
+        }
+    }
+    if lay.specular.is_some() {
+        for c in 0..lay.spec_colours {
+            p[lay.p_off() + c] *= k;
         }
     }
 }
@@ -139,6 +147,11 @@ pub(super) fn solve(
         if lay.gathered {
             let (h, g, _) = normal_equations(lay, m, &p);
             let idx: Vec<usize> = (0..3).map(|c| lay.q_off() + c).collect();
+            block_step(&mut p, &h, &g, &idx, &lbs(&idx));
+        }
+        if lay.specular.is_some() {
+            let (h, g, _) = normal_equations(lay, m, &p);
+            let idx: Vec<usize> = (0..lay.spec_colours).map(|c| lay.p_off() + c).collect();
             block_step(&mut p, &h, &g, &idx, &lbs(&idx));
         }
         fix_gauge(lay, &mut p, opts.reference_frame);
