@@ -123,9 +123,8 @@ impl LevelProblem<'_> {
             .iter()
             .map(|q| {
                 let p = r * (q.x - c);
-                let s = self.light.shade(&p, &(r * q.n));
-                let m =
-                    std::array::from_fn(|ch| k * (q.albedo[ch] as f64 * s[ch] + self.offset[ch]));
+                let s = self.light.radiance(&p, &(r * q.n), q.albedo);
+                let m = std::array::from_fn(|ch| k * (s[ch] + self.offset[ch]));
                 (m, p.norm())
             })
             .collect();
@@ -189,10 +188,10 @@ impl LevelProblem<'_> {
                 let Some((obs, _, _)) = self.observe(&p) else {
                     return f32::NAN;
                 };
-                let s = self.light.shade(&p, &(r * q.n));
+                let s = self.light.radiance(&p, &(r * q.n), q.albedo);
                 (0..3)
                     .map(|ch| {
-                        let m = k * (q.albedo[ch] as f64 * s[ch] + self.offset[ch]);
+                        let m = k * (s[ch] + self.offset[ch]);
                         huber((obs[ch] as f64 - m) * inv_sigma[ch] as f64, self.huber).0
                     })
                     .sum::<f64>() as f32
@@ -228,9 +227,9 @@ impl LevelProblem<'_> {
             let n = r * q.n;
             out.used += 1;
             if !with_normal_equations {
-                let s = self.light.shade(&p, &n);
+                let s = self.light.radiance(&p, &n, q.albedo);
                 for ch in 0..3 {
-                    let m = k * (q.albedo[ch] as f64 * s[ch] + self.offset[ch]);
+                    let m = k * (s[ch] + self.offset[ch]);
                     let e = (obs[ch] as f64 - m) * inv_sigma[ch] as f64;
                     out.cost += huber(e, self.huber).0;
                     out.sum_sq += e * e;
@@ -241,7 +240,7 @@ impl LevelProblem<'_> {
             let dpix = projection_jacobian(cam, &p, pinhole);
             for ch in 0..3 {
                 let a = q.albedo[ch] as f64;
-                let m = k * (a * sg.value[ch] + self.offset[ch]);
+                let m = k * (a * sg.value[ch] + sg.specular[ch] + self.offset[ch]);
                 let w_sigma = inv_sigma[ch] as f64;
                 let e = (obs[ch] as f64 - m) * w_sigma;
                 let (cost, w) = huber(e, self.huber);
@@ -258,8 +257,8 @@ impl LevelProblem<'_> {
                 let gw = gq.cross(&p);
                 let mut j = Vec7::zeros();
                 for i in 0..3 {
-                    j[i] = -gq[i] - k * a * sg.grad[ch][i];
-                    j[3 + i] = gw[i] - k * a * sg.grad[ch][3 + i];
+                    j[i] = -gq[i] - k * (a * sg.grad[ch][i] + sg.specular_grad[ch][i]);
+                    j[3 + i] = gw[i] - k * (a * sg.grad[ch][3 + i] + sg.specular_grad[ch][3 + i]);
                 }
                 j[6] = -m;
                 j *= w_sigma;

@@ -180,10 +180,8 @@ impl PhotometricModel<'_> {
                 }
                 None => [1.0; 3],
             };
-            let s = self.light.shade(&(to_cam * dir), &(to_cam * n));
-            lum_sum += (0..3)
-                .map(|c| LUMA[c] * albedo[c] as f64 * s[c])
-                .sum::<f64>();
+            let s = self.light.radiance(&(to_cam * dir), &(to_cam * n), albedo);
+            lum_sum += (0..3).map(|c| LUMA[c] * s[c]).sum::<f64>();
             if gamma >= min_gamma {
                 *slot = points.len() as u32;
                 points.push(ModelPoint {

@@ -102,7 +102,7 @@ fn render_geometry(model: &PhotometricModel, grid: &RayGrid, pose: &Affine) -> F
     for p in &view.points {
         let s = model
             .light
-            .shade(&(to_cam * (p.x - centre)), &(to_cam * p.n));
+            .radiance(&(to_cam * (p.x - centre)), &(to_cam * p.n), [1.0; 3]);
         let i = 3 * p.ray as usize;
         for (c, v) in img.rgb[i..i + 3].iter_mut().enumerate() {
             *v = (s[c] + view.offset[c]) as f32;

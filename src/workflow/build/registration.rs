@@ -28,7 +28,7 @@ use crate::registration::{
     RoundOptions, TrackState, VideoOptions,
 };
 use crate::render::{MipOptions, MipTexture};
-use crate::shading::calibrated::CalibratedModel;
+use crate::shading::calibrated::{CalibratedModel, CalibratedOptions, SpecularMode};
 use crate::shading::{FittedShading, ShadingKind};
 use crate::workflow::progress::Progress;
 use crate::workflow::registration_overlays::{choose_overlay_frames, pose_overlays};
@@ -349,6 +349,13 @@ pub(super) fn round_light(
         refine_light: 0,
         // The photometric registration predicts with the uniform inter-reflection.
         interreflection: crate::shading::indirect::InterreflectionMode::Uniform,
+        // Without the lobe's search: the rounds' light (no gain corrections or refits) finds no
+        // lobe, and fitting with it anyway moved the registration on the demo phantom with
+        // 1.5 mm / 2 deg drift from 0.755 to 1.272 deg median (BENCHMARKS.md).
+        calibrated: CalibratedOptions {
+            specular: SpecularMode::None,
+            ..opts.calibrated.clone()
+        },
         ..opts.clone()
     };
     let light = calibrated_light(scene, samples, &light_opts, &mut round_warnings)?;
