@@ -168,7 +168,8 @@ fn the_viewer_draws_what_render_draws_and_navigates_inside_the_lumen() {
         eprintln!("{image}: {p:.2} dB against render");
         worst = worst.min(p);
     }
-    assert!(worst >= 35.0, "worst view {worst:.2} dB < 35 dB");
+    // 59.7-60.9 dB here; without the specular term in the shader the worst view was 38.1 dB.
+    assert!(worst >= 45.0, "worst view {worst:.2} dB < 45 dB");
 
     let nav = drive(&["navigate", "viewer"], dir);
     eprintln!("navigation: {nav}");

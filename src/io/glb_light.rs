@@ -182,7 +182,9 @@ pub fn add_scope_light(
 /// The full light model for engines that implement it (DESIGN.md, "one calibrated light").
 fn light_extras(light: &CalibratedModel, spot: &SpotFit, scale: f32, balance: [f32; 3]) -> Value {
     json!({
-        "model": "I_c = gain * albedo_c * rho_c(gamma) * s(theta) / z^2 + ambient_c + kappa_c * L",
+        "model": "I_c = gain * (albedo_c * rho_c(gamma) + k_c * spec(gamma)) * s(theta) / z^2 + ambient_c + kappa_c * L",
+        "specular": light.specular,
+        "specular_lobe": "spec(gamma) = D G1^2 / (4 gamma) of GGX with roughness alpha, n.h = gamma (light at the lens), scaled to 1 at gamma = 1; absent: k = 0",
         "albedo_c": "base colour texture (linear) / (albedo_scale * colour_balance_c)",
         "rho": light.rho,
         "rho_basis": "Bernstein in gamma = |cos| between the view ray and the normal, over [0, 1]",

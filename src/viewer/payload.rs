@@ -40,7 +40,7 @@ pub struct Section {
 #[derive(Clone, Debug, Serialize)]
 #[serde(tag = "kind", rename_all = "lowercase")]
 pub enum ShadingData {
-    /// `rho_c(gamma) s(theta) / z^2 + ambient_c`, then `kappa_c` times the view's own mean
+    /// `rho_c(gamma) s(theta) / z^2 + ambient_c` (+ the specular term), then `kappa_c` times the view's own mean
     /// luminance on every surface pixel (see `CalibratedModel::view_interreflection`).
     Calibrated {
         /// Bernstein coefficients of rho per channel (linear intensity x mm²).
@@ -53,6 +53,8 @@ pub enum ShadingData {
         ambient: [f64; 3],
         /// kappa_c of the inter-reflection term, when fitted.
         interreflection: Option<[f64; 3]>,
+        /// The specular term `k_c spec_alpha(gamma) s(theta) / z^2` added without the albedo.
+        specular: Option<crate::shading::calibrated::SpecularLobe>,
         /// The learnt auto-exposure: `gain = exp(a + b ln(clamp(L, lo, hi)))`.
         auto_exposure: Option<ExposureData>,
     },
@@ -105,6 +107,7 @@ impl ShadingData {
                     cos_theta_edge: c.cos_theta_edge,
                     ambient: c.new_view_ambient(),
                     interreflection: c.interreflection,
+                    specular: c.specular,
                     auto_exposure: c.auto_exposure.as_ref().map(|ae| ExposureData {
                         a: ae.log_gain_at_unit_light,
                         b: ae.slope,

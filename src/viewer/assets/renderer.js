@@ -193,6 +193,8 @@ BS.Renderer = (function () {
         gl.uniform1i(u.uKind, 0);
         gl.uniform1f(u.uCosEdge, sh.cos_theta_edge);
         gl.uniform3fv(u.uAmbient, sh.ambient);
+        gl.uniform3fv(u.uSpecK, sh.specular ? sh.specular.k : [0, 0, 0]);
+        gl.uniform1f(u.uSpecAlpha, sh.specular ? sh.specular.alpha : 1);
         return;
       }
       gl.uniform1i(u.uKind, 1);

@@ -76,6 +76,8 @@ uniform sampler2D uCoverage;   // 1 where a frame saw the texel
 uniform int uMarkUnseen;       // tint the walls no frame saw (synthesised or filled)
 uniform float uCosEdge;
 uniform vec3 uAmbient;
+uniform vec3 uSpecK;           // the specular term's colour (0: none)
+uniform float uSpecAlpha;      // its GGX roughness
 uniform int uPsiCount;         // blended viewpoints (<= 4)
 uniform vec4 uPsiC[12];        // c_0..c_3 of viewpoint k, channel c at [3 k + c]
 uniform vec3 uPsiD[12];        // d_1..d_3
@@ -120,6 +122,15 @@ vec3 albedo(vec2 uv, float lod) {
   return a.w <= 1e-6 ? vec3(0.0) : a.rgb / a.w;
 }
 
+// GGX lobe with the light at the lens, D G1^2 / (4 gamma), 1 at gamma = 1 (lobe in specular.rs).
+float ggxLobe(float a, float gamma) {
+  float g = clamp(gamma, 1e-4, 1.0);
+  float a2 = a * a;
+  float den = g * g * (a2 - 1.0) + 1.0;
+  float g1 = 2.0 * g / (g + sqrt(a2 + (1.0 - a2) * g * g));
+  return a2 * a2 / (den * den) * g1 * g1 / g;
+}
+
 void main() {
   vec2 px = vec2(gl_FragCoord.x - 0.5, uSize.y - gl_FragCoord.y - 0.5);
   vec3 ray = imageRay(px);
@@ -142,8 +153,10 @@ void main() {
   vec3 offset = vec3(0.0);
   if (uKind == 0) {
     float t = clamp((1.0 - ray.z) / (1.0 - uCosEdge), 0.0, 1.0);
-    scale = lightS(t) / (z * z) * vec3(rho0(gamma), rho1(gamma), rho2(gamma));
-    offset = uAmbient;
+    float light = lightS(t) / (z * z);
+    scale = light * vec3(rho0(gamma), rho1(gamma), rho2(gamma));
+    // The highlight: the light's colour, not the albedo's (shading::calibrated::specular).
+    offset = uAmbient + light * uSpecK * ggxLobe(uSpecAlpha, gamma);
   } else {
     float s = 1.0 - gamma;
     vec4 bg = vec4(s * s * s, 3.0 * s * s * gamma, 3.0 * s * gamma * gamma, gamma * gamma * gamma);
