@@ -12,14 +12,8 @@
 
 use std::path::Path;
 
-use bronchosim::io::png::read_png;
 use bronchosim::model::Model;
-use bronchosim::phantom::truth_io::read_png16;
-use bronchosim::raycast::cast_frame;
-use bronchosim::render::{
-    read_views, render_view, MipOptions, MipTexture, RenderInputs, RenderOptions,
-};
-use bronchosim::workflow::truth_eval::truth_camera;
+use bronchosim::phantom::analysis::texture_against_truth;
 
 fn lum(c: &[f32]) -> f64 {
     0.2126 * c[0] as f64 + 0.7152 * c[1] as f64 + 0.0722 * c[2] as f64
@@ -55,51 +49,16 @@ fn main() -> bronchosim::Result<()> {
         std::process::exit(2);
     };
     let model = Model::load(Path::new(model))?;
-    let truth_dir = Path::new(truth);
-    let camera = truth_camera(truth_dir)?;
-    let views = read_views(&truth_dir.join("views.json"), truth_dir)?;
-    let cov_png = read_png(&model.dir.join("coverage.png"))?;
-    let coverage = MipTexture::new(
-        &cov_png,
-        None,
-        model.manifest.texel_mm,
-        &MipOptions { max_level: 0 },
-    )?;
-    let opts = RenderOptions {
-        albedo_only: true,
-        mipmap: false,
-        ..Default::default()
-    };
-    let with = |t| RenderInputs {
-        texture: t,
-        ..model.render_inputs()
-    };
-    let (w, h) = (camera.width as usize, camera.height as usize);
     let mut pairs = Vec::new();
     let (mut lmt, mut lmm) = (0.0, 0.0);
-    for v in &views {
-        let (alb, hit) = render_view(&with(&model.texture), &camera, &v.camera_to_world, &opts)?;
-        let (cov, _) = render_view(&with(&coverage), &camera, &v.camera_to_world, &opts)?;
-        let g = cast_frame(&model.scene, &camera, &v.camera_to_world);
-        let stem = v.path.with_extension("").to_string_lossy().into_owned();
-        let truth = read_png16(Path::new(&format!("{stem}_albedo.png")), 3)?;
-        let depth = read_png16(Path::new(&format!("{stem}_depth.png")), 1)?;
-        let valid: Vec<bool> = (0..w * h)
-            .map(|i| {
-                let (z, t) = (g.z[i], depth[i] as f32 / 100.0);
-                hit[i] && t > 0.0 && cov.rgb[3 * i] >= 0.999 && (z - t).abs() < 0.3 + 0.02 * t
-            })
-            .collect();
-        let m: Vec<f64> = alb.rgb.chunks_exact(3).map(lum).collect();
-        let t: Vec<f64> = truth
-            .chunks_exact(3)
-            .map(|c| lum(&c.iter().map(|&x| x as f32 / 65535.0).collect::<Vec<_>>()))
-            .collect();
-        for i in (0..w * h).filter(|&i| valid[i]) {
+    for v in texture_against_truth(&model, &model.texture, Path::new(truth))? {
+        let m: Vec<f64> = v.rendered.chunks_exact(3).map(lum).collect();
+        let t: Vec<f64> = v.truth.chunks_exact(3).map(lum).collect();
+        for i in (0..v.valid.len()).filter(|&i| v.valid[i]) {
             lmt += m[i] * t[i];
             lmm += m[i] * m[i];
         }
-        pairs.extend(high_pass(&m, &t, &valid, w, h));
+        pairs.extend(high_pass(&m, &t, &v.valid, v.width, v.height));
     }
     let (mm, tt) = pairs
         .iter()

@@ -480,24 +480,19 @@ fn calibrated_new_views_reflect_their_own_light() {
     // A light with a cone and 6% / 5% / 4% inter-reflection per unit of the view's light.
     let kappa = [0.06, 0.05, 0.04];
     let light = CalibratedModel {
-        rho: [
-            vec![0.0, 40.0, 80.0, 120.0],
-            vec![0.0, 20.0, 40.0, 60.0],
-            vec![0.0, 15.0, 30.0, 45.0],
-        ],
-        s: vec![1.0, 0.7],
-        cos_theta_edge: 0.5,
         gains: vec![1.0],
-        reference_frame: 0,
         ambient: Some(vec![[0.0; 3]]),
         interreflection: Some(kappa),
         frame_light: Some(vec![0.0]),
-        gathered: None,
-        frame_indirect: None,
-        specular: None,
-        auto_exposure: None,
-        rms_residual: [0.0; 3],
-        samples_used: 0,
+        ..CalibratedModel::new(
+            [
+                vec![0.0, 40.0, 80.0, 120.0],
+                vec![0.0, 20.0, 40.0, 60.0],
+                vec![0.0, 15.0, 30.0, 45.0],
+            ],
+            vec![1.0, 0.7],
+            0.5,
+        )
     };
     let shading = FittedShading::new(ShadingKind::Calibrated, psi, Some(light.clone()));
     let inputs = RenderInputs {

@@ -172,20 +172,13 @@ mod tests {
     #[test]
     fn calibrated_shade_follows_inverse_square_and_gain() {
         let m = CalibratedModel {
-            rho: [vec![0.0, 1.0], vec![0.0, 2.0], vec![0.0, 3.0]],
-            s: vec![1.0, 0.5],
-            cos_theta_edge: 0.5,
             gains: vec![1.0, 2.0],
-            reference_frame: 0,
             ambient: Some(vec![[0.0; 3], [0.1, 0.2, 0.3]]),
-            interreflection: None,
-            frame_light: None,
-            gathered: None,
-            frame_indirect: None,
-            specular: None,
-            auto_exposure: None,
-            rms_residual: [0.0; 3],
-            samples_used: 0,
+            ..CalibratedModel::new(
+                [vec![0.0, 1.0], vec![0.0, 2.0], vec![0.0, 3.0]],
+                vec![1.0, 0.5],
+                0.5,
+            )
         };
         let f = FrameShading::Calibrated {
             model: &m,

@@ -26,9 +26,28 @@ pub struct AlbedoError {
     pub pixels: usize,
 }
 
-/// [`AlbedoError`] of `texture` (the model's own or its paper texture) on `model`'s mesh,
-/// through the views of the phantom truth folder `truth_dir`.
-pub fn albedo_error(model: &Model, texture: &MipTexture, truth_dir: &Path) -> Result<AlbedoError> {
+/// One truth view: the texture rendered alone and the true albedo (linear RGB, row-major),
+/// and the pixels where they can be compared (same surface within 0.3 mm + 2 %, observed).
+pub struct TruthView {
+    /// The model's texture at each pixel (unshaded).
+    pub rendered: Vec<f32>,
+    /// The true albedo at each pixel.
+    pub truth: Vec<f32>,
+    /// Where the two may be compared.
+    pub valid: Vec<bool>,
+    /// Image width (pixels).
+    pub width: usize,
+    /// Image height (pixels).
+    pub height: usize,
+}
+
+/// `texture` on `model`'s mesh seen from every view of the phantom truth folder `truth_dir`,
+/// beside the true albedo.
+pub fn texture_against_truth(
+    model: &Model,
+    texture: &MipTexture,
+    truth_dir: &Path,
+) -> Result<Vec<TruthView>> {
     let camera = truth_camera(truth_dir)?;
     let views = read_views(&truth_dir.join("views.json"), truth_dir)?;
     let cov_png = read_png(&model.dir.join("coverage.png"))?;
@@ -47,28 +66,47 @@ pub fn albedo_error(model: &Model, texture: &MipTexture, truth_dir: &Path) -> Re
         texture: t,
         ..model.render_inputs()
     };
+    views
+        .iter()
+        .map(|v| {
+            let (alb, hit) = render_view(&with(texture), &camera, &v.camera_to_world, &opts)?;
+            let (cov, _) = render_view(&with(&coverage), &camera, &v.camera_to_world, &opts)?;
+            let g = cast_frame(&model.scene, &camera, &v.camera_to_world);
+            let stem = v.path.with_extension("").to_string_lossy().into_owned();
+            let truth = read_png16(Path::new(&format!("{stem}_albedo.png")), 3)?;
+            let depth = read_png16(Path::new(&format!("{stem}_depth.png")), 1)?;
+            if truth.len() != 3 * hit.len() || depth.len() != hit.len() {
+                return Err(Error::invalid(
+                    &v.path,
+                    "the truth albedo/depth images do not match the camera's size",
+                ));
+            }
+            let valid = (0..hit.len())
+                .map(|i| {
+                    let (z, t) = (g.z[i], depth[i] as f32 / 100.0);
+                    hit[i] && t > 0.0 && cov.rgb[3 * i] >= 0.999 && (z - t).abs() < 0.3 + 0.02 * t
+                })
+                .collect();
+            Ok(TruthView {
+                rendered: alb.rgb,
+                truth: truth.iter().map(|&c| c as f32 / 65535.0).collect(),
+                valid,
+                width: camera.width as usize,
+                height: camera.height as usize,
+            })
+        })
+        .collect()
+}
+
+/// [`AlbedoError`] of `texture` (the model's own or its paper texture) on `model`'s mesh,
+/// through the views of the phantom truth folder `truth_dir`.
+pub fn albedo_error(model: &Model, texture: &MipTexture, truth_dir: &Path) -> Result<AlbedoError> {
     let (mut tr, mut rr, mut tt) = ([0f64; 3], [0f64; 3], [0f64; 3]);
     let mut pairs: Vec<([f32; 3], [f32; 3])> = Vec::new();
-    for v in &views {
-        let (alb, hit) = render_view(&with(texture), &camera, &v.camera_to_world, &opts)?;
-        let (cov, _) = render_view(&with(&coverage), &camera, &v.camera_to_world, &opts)?;
-        let g = cast_frame(&model.scene, &camera, &v.camera_to_world);
-        let stem = v.path.with_extension("").to_string_lossy().into_owned();
-        let truth = read_png16(Path::new(&format!("{stem}_albedo.png")), 3)?;
-        let depth = read_png16(Path::new(&format!("{stem}_depth.png")), 1)?;
-        if truth.len() != 3 * hit.len() || depth.len() != hit.len() {
-            return Err(Error::invalid(
-                &v.path,
-                "the truth albedo/depth images do not match the camera's size",
-            ));
-        }
-        for i in 0..hit.len() {
-            let (z, t) = (g.z[i], depth[i] as f32 / 100.0);
-            if !(hit[i] && t > 0.0 && cov.rgb[3 * i] >= 0.999 && (z - t).abs() < 0.3 + 0.02 * t) {
-                continue;
-            }
-            let a: [f32; 3] = std::array::from_fn(|c| alb.rgb[3 * i + c]);
-            let b: [f32; 3] = std::array::from_fn(|c| truth[3 * i + c] as f32 / 65535.0);
+    for v in texture_against_truth(model, texture, truth_dir)? {
+        for i in (0..v.valid.len()).filter(|&i| v.valid[i]) {
+            let a: [f32; 3] = std::array::from_fn(|c| v.rendered[3 * i + c]);
+            let b: [f32; 3] = std::array::from_fn(|c| v.truth[3 * i + c]);
             for c in 0..3 {
                 tr[c] += (a[c] * b[c]) as f64;
                 rr[c] += (a[c] * a[c]) as f64;

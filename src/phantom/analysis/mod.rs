@@ -5,5 +5,5 @@
 pub mod albedo;
 pub mod shading;
 
-pub use albedo::albedo_error;
+pub use albedo::{albedo_error, texture_against_truth, TruthView};
 pub use shading::{shading_residuals, spread, ShadingLaw};

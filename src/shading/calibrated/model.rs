@@ -315,20 +315,13 @@ mod tests {
     #[test]
     fn eval_is_inverse_square_and_one_on_axis() {
         let m = CalibratedModel {
-            rho: [vec![0.0, 10.0, 20.0, 30.0], vec![1.0; 4], vec![2.0; 2]],
-            s: vec![1.0, 0.8, 0.5, 0.2],
-            cos_theta_edge: 0.5,
             gains: vec![1.0, 2.0],
-            reference_frame: 0,
             ambient: Some(vec![[0.0; 3], [0.01, 0.02, 0.03]]),
-            interreflection: None,
-            frame_light: None,
-            gathered: None,
-            frame_indirect: None,
-            specular: None,
-            auto_exposure: None,
-            rms_residual: [0.0; 3],
-            samples_used: 0,
+            ..CalibratedModel::new(
+                [vec![0.0, 10.0, 20.0, 30.0], vec![1.0; 4], vec![2.0; 2]],
+                vec![1.0, 0.8, 0.5, 0.2],
+                0.5,
+            )
         };
         m.validate().unwrap();
         // On the axis s = 1; at gamma = 1 rho_R = 30; z = 10 mm → 0.3.
@@ -398,20 +391,15 @@ mod tests {
             .map(|f| std::array::from_fn(|c| kappa[c] * light[f] + 0.01 * gains[f]))
             .collect();
         let m = CalibratedModel {
-            rho: [vec![1.0; 4], vec![1.0; 4], vec![1.0; 4]],
-            s: vec![1.0, 1.0],
-            cos_theta_edge: 0.5,
             gains,
-            reference_frame: 0,
             ambient: Some(ambient),
             interreflection: Some(kappa),
             frame_light: Some(light.to_vec()),
-            gathered: None,
-            frame_indirect: None,
-            specular: None,
-            auto_exposure: None,
-            rms_residual: [0.0; 3],
-            samples_used: 0,
+            ..CalibratedModel::new(
+                [vec![1.0; 4], vec![1.0; 4], vec![1.0; 4]],
+                vec![1.0, 1.0],
+                0.5,
+            )
         };
         m.validate().unwrap();
         // The part that does not move with the light: the free term alone.
