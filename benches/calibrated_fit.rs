@@ -26,15 +26,12 @@ fn bench(c: &mut Criterion) {
         .enumerate()
         .map(|(f, v)| render(v, &ropts, f as u64))
         .collect();
+    // Without texel ids: the pooling's cost alone.
     let data: Vec<FrameData> = frames
         .iter()
         .map(|fr| FrameData {
-            gamma: &fr.gamma,
-            z: &fr.z,
-            cos_theta: &fr.cos_theta,
-            rgb: &fr.rgb,
             texel: None,
-            width: fr.size,
+            ..fr.data()
         })
         .collect();
     let popts = PoolOptions::default();

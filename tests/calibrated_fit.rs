@@ -63,19 +63,8 @@ fn video_slow_albedo() -> &'static Video {
     V.get_or_init(|| video_with_slow_albedo(0.08))
 }
 
-fn frame_data(fr: &Frame) -> FrameData<'_> {
-    FrameData {
-        gamma: &fr.gamma,
-        z: &fr.z,
-        cos_theta: &fr.cos_theta,
-        rgb: &fr.rgb,
-        texel: Some(&fr.texel),
-        width: fr.size,
-    }
-}
-
 fn pooled(frames: &[&Frame]) -> (PooledSamples, Vec<f32>) {
-    let data: Vec<FrameData> = frames.iter().map(|f| frame_data(f)).collect();
+    let data: Vec<FrameData> = frames.iter().map(|f| f.data()).collect();
     let s = pool_frames(&data, &PoolOptions::default()).unwrap();
     let w = density_weights_3d(&s, &WeightOptions::default());
     (s, w)

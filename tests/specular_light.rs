@@ -28,17 +28,7 @@ fn true_peak(opts: &RenderOptions) -> f64 {
 /// The light fitted to `frames` with a uniform albedo, and again with the true albedo per
 /// sample (what the build's refits against the fused texture approach).
 fn fit(frames: &[Frame], specular: SpecularMode) -> [CalibratedModel; 2] {
-    let data: Vec<FrameData> = frames
-        .iter()
-        .map(|fr| FrameData {
-            gamma: &fr.gamma,
-            z: &fr.z,
-            cos_theta: &fr.cos_theta,
-            rgb: &fr.rgb,
-            texel: Some(&fr.texel),
-            width: fr.size,
-        })
-        .collect();
+    let data: Vec<FrameData> = frames.iter().map(Frame::data).collect();
     let s = pool_frames(&data, &PoolOptions::default()).unwrap();
     let w = density_weights_3d(&s, &WeightOptions::default());
     let opts = CalibratedOptions {

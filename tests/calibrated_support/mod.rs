@@ -136,6 +136,20 @@ pub struct Frame {
     pub albedo_rel: Vec<f32>,
 }
 
+impl Frame {
+    /// The frame as the calibrated fit's pooling reads it (texel ids included).
+    pub fn data(&self) -> bronchosim::shading::calibrated::FrameData<'_> {
+        bronchosim::shading::calibrated::FrameData {
+            gamma: &self.gamma,
+            z: &self.z,
+            cos_theta: &self.cos_theta,
+            rgb: &self.rgb,
+            texel: Some(&self.texel),
+            width: self.size,
+        }
+    }
+}
+
 /// Render options.
 #[derive(Clone, Copy, Debug)]
 pub struct RenderOptions {
