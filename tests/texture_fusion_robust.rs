@@ -193,7 +193,7 @@ fn robust_fusion_covers_what_the_average_covers_without_seams() {
         ("misregistered", &avg, &rob),
         ("clean", &avg_clean, &rob_clean),
     ] {
-        let (sa, sr) = (a.stats.seams, r.stats.seams);
+        let (sa, sr) = (seam_stats(a, &w.texels), seam_stats(r, &w.texels));
         eprintln!(
             "{name}: seam ratio average {:.3}, robust {:.3}, truth {reference:.3}",
             sa.ratio(),

@@ -27,7 +27,6 @@ use super::max_weight::blend_pass;
 use super::multiband::{multiband_pass, MultiBandOptions};
 use super::pass::{for_visible_blocks, weight_power, Acc, CameraCache, Seen};
 use super::robust::{reweight_passes, RobustOptions};
-use super::seams::{seam_stats, SeamStats};
 use super::synthesis::{complete_unseen, SynthesisOptions, SynthesisStats};
 use super::texels::TexelSet;
 use crate::image::ImageError;
@@ -204,8 +203,6 @@ pub struct FusionStats {
     /// Heap bytes of the per-texel fusion state (excluding the [`TexelSet`] and the output).
     /// It does not depend on the number of frames.
     pub state_bytes: usize,
-    /// Gradients across and within the borders of the regions different frames dominate.
-    pub seams: SeamStats,
 }
 
 /// The fused atlas.
@@ -354,7 +351,7 @@ pub fn fuse<S: FrameStream + ?Sized>(
     Ok(output(texels, &acc, &seen, nf, state_bytes))
 }
 
-/// The fused values in atlas layout, with the counts and the seam measure.
+/// The fused values in atlas layout, with the counts.
 fn output(
     texels: &TexelSet,
     acc: &[Acc],
@@ -375,7 +372,6 @@ fn output(
             chart_texels: texels.len(),
             covered_texels: 0,
             state_bytes,
-            seams: SeamStats::default(),
         },
     };
     for (s, a) in acc.iter().enumerate() {
@@ -390,6 +386,5 @@ fn output(
             out.stats.covered_texels += 1;
         }
     }
-    out.stats.seams = seam_stats(&out, texels);
     out
 }

@@ -8,7 +8,7 @@ use super::options::BuildOptions;
 use super::scene::BuildScene;
 use crate::shading::{FittedShading, ShadingKind};
 use crate::texture::fusion::fuse;
-use crate::texture::seams::SeamStats;
+use crate::texture::seams::{seam_stats, SeamStats};
 use crate::texture::synthesis::SynthesisStats;
 use crate::Result;
 
@@ -97,6 +97,7 @@ fn fuse_albedo(
     );
     let fused = fuse(&scene.texels, &mut stream, &opts.fusion)?;
     stream.progress.finish();
+    let seams = seam_stats(&fused, &scene.texels);
     let start = std::time::Instant::now();
     let (mut rgb, synthesis, synthesised) =
         fused.completed(&scene.texels, scene.atlas.texel_mm, &opts.unseen)?;
@@ -109,7 +110,7 @@ fn fuse_albedo(
         synthesis,
         synthesis_seconds,
         colour_balance,
-        seams: fused.stats.seams,
+        seams,
     })
 }
 
