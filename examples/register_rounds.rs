@@ -5,9 +5,10 @@
 //! ```sh
 //! cargo run --release --example register_rounds -- CASE WORK [rounds=3] [first=chroma|texture]
 //!     [start=DIR] [final=yes|no] [floor=F] [sigma=S] [huber=H] [gain=yes|no] [coarsest=L] [finest=L]
-//!     [chw=R,G,B]
+//!     [chw=R,G,B] [kinds=GTTGTT]
 //! ```
 //! `start=CASE/truth` starts from the true poses (what a round does to them: its bias);
+//! `kinds` gives each round's kind (G: geometry, T: texture) in place of `rounds` and `first`;
 //! `floor`, `sigma`, `huber`, `gain`, `coarsest`, `finest`, `chw` set the per-frame registration's options.
 //! Each round writes `round_N/errors.csv`: per frame, the error of its own (`measured`) and of
 //! the smoothed pose against the truth, in the true camera's axes (mm, degrees).
@@ -92,6 +93,32 @@ fn write_errors(
     Ok(())
 }
 
+/// Per frame: the pose the round started from, the frame's own refined pose, its status, cost
+/// and Gauss–Newton information (camera-frame step), as JSON, for studying the smoothing.
+fn write_measurements(
+    path: &Path,
+    start: &[Affine],
+    v: &bronchosim::registration::VideoRegistration,
+) -> anyhow::Result<()> {
+    let rows: Vec<serde_json::Value> = v
+        .frames
+        .iter()
+        .zip(&v.measured)
+        .zip(start)
+        .map(|((f, m), s)| {
+            serde_json::json!({
+                "start": s.iter().copied().collect::<Vec<f64>>(),
+                "measured": m.iter().copied().collect::<Vec<f64>>(),
+                "status": f.status.name(),
+                "cost_after": f.cost_after,
+                "information": f.information,
+            })
+        })
+        .collect();
+    std::fs::write(path, serde_json::to_string(&rows)?)?;
+    Ok(())
+}
+
 /// A copy of the case at `to` with its own poses.json (everything else hard-linked).
 fn case_copy(from: &Path, to: &Path, poses: &[PoseEntry]) -> anyhow::Result<()> {
     std::fs::create_dir_all(to.join("frames"))?;
@@ -140,6 +167,8 @@ fn main() -> anyhow::Result<()> {
         ..Default::default()
     };
     let mut final_model = true;
+    // Kind of each round: G (geometry, colour albedo) or T (texture); overrides rounds/first.
+    let mut kinds: Option<Vec<bool>> = None;
     for kv in &args[2..] {
         match kv.split_once('=') {
             Some(("rounds", v)) => rounds = v.parse()?,
@@ -150,6 +179,7 @@ fn main() -> anyhow::Result<()> {
             Some(("sigma", v)) => frame_opts.relative_sigma = v.parse()?,
             Some(("huber", v)) => frame_opts.huber = v.parse()?,
             Some(("final", v)) => final_model = v == "yes",
+            Some(("kinds", v)) => kinds = Some(v.chars().map(|c| c == 'G').collect()),
             Some(("gain", v)) => frame_opts.estimate_gain = v == "yes",
             Some(("coarsest", v)) => frame_opts.coarsest_level = v.parse()?,
             Some(("finest", v)) => frame_opts.finest_level = v.parse()?,
@@ -186,6 +216,9 @@ fn main() -> anyhow::Result<()> {
         force: true,
         ..Default::default()
     };
+    if let Some(k) = &kinds {
+        rounds = k.len();
+    }
     for r in 1..=rounds {
         let dir = work.join(format!("round_{r}"));
         let rcase = dir.join("case");
@@ -198,7 +231,10 @@ fn main() -> anyhow::Result<()> {
         let t_build = t.elapsed().as_secs_f64();
         let model = Model::load(&dir.join("model"))?;
         let light = model.calibrated().expect("calibrated light");
-        let chroma = r == 1 && first_chroma;
+        let chroma = match &kinds {
+            Some(k) => k[r - 1],
+            None => r == 1 && first_chroma,
+        };
         let opts = RegistrationOptions {
             uniform_albedo_from_level: if chroma { 0 } else { usize::MAX },
             ..frame_opts.clone()
@@ -236,6 +272,7 @@ fn main() -> anyhow::Result<()> {
         let t_reg = t.elapsed().as_secs_f64();
         let smoothed: Vec<Affine> = v.frames.iter().map(|f| f.pose).collect();
         write_errors(&dir.join("errors.csv"), &v.measured, &smoothed, &truth)?;
+        write_measurements(&dir.join("measurements.json"), &current, &v)?;
         // Over-relaxation of the smooth part of the corrections (experiment): the texture
         // follows the poses, so a round removes only a fraction of a smooth drift.
         let deltas: Vec<_> = v

@@ -298,7 +298,8 @@ fn smooth(
         .map(|f| ok[f] && res[f].status != FrameStatus::Outlier)
         .collect();
     let rot: Vec<_> = res.iter().map(|r| rotation_of(&r.pose)).collect();
-    let s = smooth_corrections(deltas, &rot, &usable, frame_numbers, prior);
+    let information: Vec<_> = res.iter().map(|r| r.information).collect();
+    let s = smooth_corrections(deltas, &rot, &information, &usable, frame_numbers, prior);
     for (f, d) in s.corrections.iter().enumerate() {
         res[f].pose = apply_delta(&poses[f], d);
         res[f].correction = *d;

@@ -243,9 +243,14 @@ pub struct BuildArgs {
     /// then refine them.
     #[arg(long, value_enum, default_value_t = build_defaults().poses)]
     pub poses: PosesMode,
-    /// Most rounds of the registration (light + texture, then every frame's pose).
+    /// Most rounds of the registration (light + texture, then every frame's pose); rounds
+    /// 0, N, 2N, ... (N = --geometry-every) register against the CT's geometry alone.
     #[arg(long, default_value_t = build_defaults().registration_rounds)]
     pub registration_rounds: usize,
+    /// Every N-th registration round registers against the geometry again: the texture
+    /// cannot see an error all frames share (a turn about the airway's axis).
+    #[arg(long, default_value_t = build_defaults().registration_geometry_every)]
+    pub geometry_every: usize,
     /// Most frames the model is built from: every frame is scored (sharpness against its
     /// neighbours, exposure) and the frames that add the most coverage of the wall are kept;
     /// blurred or badly exposed frames only where nothing better sees the wall (model.json
@@ -265,9 +270,14 @@ pub struct RegisterArgs {
     /// Output folder (poses.json, registration.json, report.html).
     #[arg(long)]
     pub out: PathBuf,
-    /// Most rounds (light + texture, then every frame's pose).
+    /// Most rounds (light + texture, then every frame's pose); rounds 0, N, 2N, ...
+    /// (N = --geometry-every) register against the CT's geometry alone.
     #[arg(long, default_value_t = build_defaults().registration_rounds)]
     pub rounds: usize,
+    /// Every N-th round registers against the geometry again: the texture cannot see an error
+    /// all frames share (a turn about the airway's axis).
+    #[arg(long, default_value_t = build_defaults().registration_geometry_every)]
+    pub geometry_every: usize,
     /// `refine`: start from every frame's given pose. `first`: trust only the first frame's
     /// (poses.json may hold that pose alone) and track the others from it before the rounds
     /// (0 rounds: tracking alone). `fixed` is refused: there would be nothing to do.

@@ -88,6 +88,7 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
         working_level: a.working_level.map(usize::from),
         poses: a.poses,
         registration_rounds: a.registration_rounds,
+        registration_geometry_every: a.geometry_every,
         ..Default::default()
     };
     opts.selection.max_frames = a.max_frames;
@@ -133,6 +134,7 @@ fn register(a: RegisterArgs, quiet: bool) -> anyhow::Result<String> {
         force: a.force,
         quiet,
         registration_rounds: a.rounds,
+        registration_geometry_every: a.geometry_every,
         poses: a.poses,
         ..Default::default()
     };
