@@ -11,7 +11,9 @@
 //! `kinds` gives each round's kind (G: geometry, T: texture) in place of `rounds` and `first`;
 //! `floor`, `sigma`, `huber`, `gain`, `coarsest`, `finest`, `chw` set the per-frame registration's options.
 //! Each round writes `round_N/errors.csv`: per frame, the error of its own (`measured`) and of
-//! the smoothed pose against the truth, in the true camera's axes (mm, degrees).
+//! the smoothed pose against the truth, in the true camera's axes (mm, degrees); and
+//! `round_N/measurements.json`: per frame the start pose, its own refined pose, status, cost and
+//! Gauss–Newton information (read by bench/registration_smoothing.py).
 //! CASE is a phantom case with `truth/poses.json` (e.g. `bronchosim phantom --pose-noise-mm 1.5
 //! --pose-noise-deg 2`). WORK receives `round_N/case` (frames hard-linked) and `round_N/model`,
 //! and a final model built with the last poses and scored on the truth views

@@ -300,13 +300,28 @@ mod tests {
     use crate::math::Vector3;
     use crate::rng::Pcg32;
 
+    /// Camera → world rotation of a camera looking along world +x (camera z = world x).
+    fn looking_along_x() -> Matrix3<f64> {
+        Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0)
+    }
+
+    /// RMS over the frames of `f(a) - f(truth)`.
+    fn rms_against(a: &[PoseDelta], truth: &[PoseDelta], f: &dyn Fn(&PoseDelta) -> f64) -> f64 {
+        let sum: f64 = a
+            .iter()
+            .zip(truth)
+            .map(|(x, t)| (f(x) - f(t)).powi(2))
+            .sum();
+        (sum / a.len() as f64).sqrt()
+    }
+
     #[test]
     fn noisy_roll_is_smoothed_and_precise_axes_are_kept() {
         // 120 frames looking along world +x (camera z = world x), a smooth drift plus jitter as
         // the true correction; measurements add 2 degrees of noise to the roll (about camera
         // z) and nothing elsewhere.
         let n = 120;
-        let r = Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0);
+        let r = looking_along_x();
         let mut rng = Pcg32::new(3, 1);
         let truth: Vec<PoseDelta> = (0..n)
             .map(|f| {
@@ -341,14 +356,7 @@ mod tests {
         // The roll noise is found (about 2 degrees), the other axes are clean.
         assert!((s.noise[5] - 2.0).abs() < 0.5, "{:?}", s.noise);
         assert!(s.noise[0] < 0.05 && s.noise[3] < 0.1, "{:?}", s.noise);
-        let rms = |a: &[PoseDelta], f: &dyn Fn(&PoseDelta) -> f64| {
-            (a.iter()
-                .zip(&truth)
-                .map(|(x, t)| (f(x) - f(t)).powi(2))
-                .sum::<f64>()
-                / n as f64)
-                .sqrt()
-        };
+        let rms = |a: &[PoseDelta], f: &dyn Fn(&PoseDelta) -> f64| rms_against(a, &truth, f);
         let roll = |d: &PoseDelta| d.rotation.x.to_degrees();
         let (before, after) = (rms(&measured, &roll), rms(&s.corrections, &roll));
         assert!(
@@ -419,7 +427,7 @@ mod tests {
         // measurement noise is large along that direction and small elsewhere; its information
         // says so. No single noise per camera axis can describe the coupling.
         let n = 160;
-        let r_cam = Matrix3::new(0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0);
+        let r_cam = looking_along_x();
         let mut rng = Pcg32::new(7, 5);
         let truth: Vec<PoseDelta> = (0..n)
             .map(|f| {
@@ -456,14 +464,7 @@ mod tests {
                 }
             })
             .collect();
-        let rms = |a: &[PoseDelta], f: &dyn Fn(&PoseDelta) -> f64| {
-            (a.iter()
-                .zip(&truth)
-                .map(|(x, t)| (f(x) - f(t)).powi(2))
-                .sum::<f64>()
-                / n as f64)
-                .sqrt()
-        };
+        let rms = |a: &[PoseDelta], f: &dyn Fn(&PoseDelta) -> f64| rms_against(a, &truth, f);
         let roll = |d: &PoseDelta| d.rotation.x.to_degrees();
         let side = |d: &PoseDelta| d.translation_mm.y;
         let smooth = |noise| {
