@@ -4,12 +4,12 @@
 //!
 //! ```sh
 //! cargo run --release --example register_rounds -- CASE WORK [rounds=3] [first=chroma|texture]
-//!     [start=DIR] [final=yes|no] [floor=F] [sigma=S] [huber=H] [gain=yes|no] [coarsest=L] [finest=L]
+//!     [start=DIR] [final=yes|no] [floor=F] [sigma=S] [huber=H] [gain=yes|no] [sat=S] [coarsest=L] [finest=L]
 //!     [chw=R,G,B] [kinds=GTTGTT]
 //! ```
 //! `start=CASE/truth` starts from the true poses (what a round does to them: its bias);
 //! `kinds` gives each round's kind (G: geometry, T: texture) in place of `rounds` and `first`;
-//! `floor`, `sigma`, `huber`, `gain`, `coarsest`, `finest`, `chw` set the per-frame registration's options.
+//! `floor`, `sigma`, `huber`, `gain`, `sat`, `coarsest`, `finest`, `chw` set the per-frame registration's options.
 //! Each round writes `round_N/errors.csv`: per frame, the error of its own (`measured`) and of
 //! the smoothed pose against the truth, in the true camera's axes (mm, degrees); and
 //! `round_N/measurements.json`: per frame the start pose, its own refined pose, status, cost and
@@ -183,6 +183,7 @@ fn main() -> anyhow::Result<()> {
             Some(("final", v)) => final_model = v == "yes",
             Some(("kinds", v)) => kinds = Some(v.chars().map(|c| c == 'G').collect()),
             Some(("gain", v)) => frame_opts.estimate_gain = v == "yes",
+            Some(("sat", v)) => frame_opts.saturation_level = v.parse()?,
             Some(("coarsest", v)) => frame_opts.coarsest_level = v.parse()?,
             Some(("finest", v)) => frame_opts.finest_level = v.parse()?,
             Some(("chw", v)) => {
@@ -258,7 +259,10 @@ fn main() -> anyhow::Result<()> {
             let grid = RayGrid::new(&model.manifest.camera, 2, 1);
             let every: Vec<Affine> = current.iter().step_by(4).copied().collect();
             let rel = ChromaAlbedo::fit(&reg.model, &grid, &every)?;
-            normalised = frames.iter().map(|f| rel.normalise(f, 0.999)).collect();
+            normalised = frames
+                .iter()
+                .map(|f| rel.normalise(f, frame_opts.saturation_level))
+                .collect();
             &normalised
         } else {
             &frames
