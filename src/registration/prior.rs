@@ -8,11 +8,12 @@
 //!
 //! The noise n is modelled per camera axis from the video, or per frame from its own
 //! registration ([`MeasurementNoise`]): the Gauss–Newton information of its pose says which
-//! combinations of axes the frame's image fixes. In a tube the weak direction is not an axis but a roll coupled with a sideways shift
-//! (the turn about the airway's axis), and it changes with what the frame sees: measured on the
-//! demo phantom's geometry round (1.5 mm / 2 deg drift), smoothing with each frame's information
-//! leaves roll 0.43 deg RMS where one noise per camera axis leaves 0.87 deg (the information's
-//! diagonal alone: 1.34 deg).
+//! combinations of axes the frame's image fixes. In a tube the weak direction is not an axis
+//! but a roll coupled with a sideways shift (the turn about the airway's axis), and it changes
+//! with what the frame sees: measured on the demo phantom's geometry round (1.5 mm / 2 deg
+//! drift), smoothing with each frame's information leaves roll 0.43 deg RMS where one noise per
+//! camera axis leaves 0.87 deg (the information's diagonal alone: 1.34 deg).
+
 use super::pose::PoseDelta;
 use crate::math::Matrix3;
 use nalgebra::{SMatrix, SVector};

@@ -7,7 +7,8 @@
 //! phantom with 1.5 mm / 2 degree drift: median error 1.41 mm -> 1.42 mm). It registers against
 //! the geometry's shading alone instead, each frame divided by the albedo its colour predicts
 //! ([`super::chroma`]), red weighed most; later rounds use the texture, fused from better poses
-//! each time.
+//! each time, and the caller may go back to the geometry after some of them. A geometry round's
+//! smoother weighs each frame by its own information ([`RoundOptions::geometry_noise`]).
 
 use super::chroma::ChromaAlbedo;
 use super::frame::{FrameRegistrar, RegistrationOptions};

@@ -5,9 +5,14 @@
 //!
 //! The first round registers against the geometry's shading alone (each frame divided by the
 //! albedo its colour predicts): a texture fused from the given poses follows their errors, and
-//! frames registered against it stay where they were. Frames that end flagged (a wrong given
-//! pose, too few comparable pixels, a cost far above the video's) are left out of the model,
-//! never silently kept: [`PoseRegistration`] says which and why, and model.json counts them.
+//! frames registered against it stay where they were. Every `registration_geometry_every`-th
+//! round does so again: the texture moves with the frames, so an error they all share (a turn
+//! about the airway's axis, a shift along it) is measured by the geometry alone, and a second
+//! look from poses the texture rounds made consistent halves it (BENCHMARKS.md).
+//!
+//! Frames that end flagged (a wrong given pose, too few comparable pixels, a cost far above the
+//! video's) are left out of the model, never silently kept: [`PoseRegistration`] says which and
+//! why, and model.json counts them.
 
 use super::cross_validation::cross_validate;
 use super::error::BuildError;
