@@ -143,10 +143,13 @@ pub fn smooth_corrections(
             smooth_with_noise(&m, rot, usable, frame_numbers, prior, noise)
         }
         MeasurementNoise::Information { deflation } => {
-            let sj = jitter_covariance(prior);
+            // The jitter's own precision, shared by every frame (zero jitter: nothing to add).
+            let sj_inv = jitter_covariance(prior).try_inverse();
             let info: Vec<M6> = (0..m.len())
-                .map(|f| match (usable[f], information.get(f)) {
-                    (true, Some(i)) => registered_information(&rot[f], i, deflation, &sj),
+                .map(|f| match (usable[f], information.get(f), &sj_inv) {
+                    (true, Some(i), Some(sj_inv)) => {
+                        registered_information(&rot[f], i, deflation, sj_inv)
+                    }
                     _ => M6::zeros(),
                 })
                 .collect();
@@ -168,20 +171,17 @@ fn jitter_covariance(prior: &DriftPrior) -> M6 {
 
 /// A frame's precision for the drift, `(jitter + noise)^-1`, with the noise's information the
 /// frame's own (camera frame) divided by `deflation`: in world terms `Iw = B I B^T / deflation`,
-/// and `(S + Iw^-1)^-1 = Iw (Iw + S^-1)^-1 S^-1`, which stays finite where the image fixes
-/// nothing (`Iw` singular).
+/// and `(S + Iw^-1)^-1 = Iw (Iw + S^-1)^-1 S^-1` (`sj_inv` = `S^-1`, the jitter's precision),
+/// which stays finite where the image fixes nothing (`Iw` singular).
 fn registered_information(
     rot: &Matrix3<f64>,
     information: &[[f64; 6]; 6],
     deflation: f64,
-    sj: &M6,
+    sj_inv: &M6,
 ) -> M6 {
     let b = block_rot(rot);
     let i_cam = M6::from_fn(|r, c| information[r][c]);
     let iw = b * i_cam * b.transpose() / deflation.max(f64::MIN_POSITIVE);
-    let Some(sj_inv) = sj.try_inverse() else {
-        return M6::zeros();
-    };
     let Some(mid) = (iw + sj_inv).try_inverse() else {
         return M6::zeros();
     };
