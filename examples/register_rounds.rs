@@ -5,10 +5,12 @@
 //! ```sh
 //! cargo run --release --example register_rounds -- CASE WORK [rounds=3] [first=chroma|texture]
 //!     [start=DIR] [final=yes|no] [floor=F] [sigma=S] [huber=H] [gain=yes|no] [sat=S] [coarsest=L] [finest=L]
-//!     [chw=R,G,B] [kinds=GTTGTT]
+//!     [chw=R,G,B] [kinds=GTTGTT] [blocks=4]
 //! ```
 //! `start=CASE/truth` starts from the true poses (what a round does to them: its bias);
-//! `kinds` gives each round's kind (G: geometry, T: texture) in place of `rounds` and `first`;
+//! `kinds` gives each round's kind (G: geometry, T: texture, B: texture block by block, each of
+//! `blocks` runs of frames against a model fused from the other runs alone) in place of
+//! `rounds` and `first`;
 //! `floor`, `sigma`, `huber`, `gain`, `sat`, `coarsest`, `finest`, `chw` set the per-frame registration's options.
 //! Each round writes `round_N/errors.csv`: per frame, the error of its own (`measured`) and of
 //! the smoothed pose against the truth, in the true camera's axes (mm, degrees); and
@@ -157,6 +159,80 @@ fn case_copy(from: &Path, to: &Path, poses: &[PoseEntry]) -> anyhow::Result<()> 
     Ok(())
 }
 
+/// A texture round block by block: the video's frames in `blocks` runs, each registered against
+/// a model fused from the other runs' frames alone (its own errors, shared with its neighbours,
+/// are not in that texture). Gains are the full model's.
+#[allow(clippy::too_many_arguments)]
+fn refine_by_blocks(
+    case_dir: &Path,
+    dir: &Path,
+    entries: &[PoseEntry],
+    frames: &[bronchosim::image::Frame],
+    gains: &[f64],
+    current: &[Affine],
+    blocks: usize,
+    build_opts: &BuildOptions,
+    opts: &RegistrationOptions,
+) -> anyhow::Result<bronchosim::registration::VideoRegistration> {
+    let n = frames.len();
+    let mut all: Option<bronchosim::registration::VideoRegistration> = None;
+    for k in 0..blocks {
+        let (lo, hi) = (k * n / blocks, (k + 1) * n / blocks);
+        let others: Vec<PoseEntry> = entries
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i < lo || *i >= hi)
+            .map(|(_, e)| e.clone())
+            .collect();
+        let bdir = dir.join(format!("block_{k}"));
+        if bdir.exists() {
+            std::fs::remove_dir_all(&bdir)?;
+        }
+        case_copy(case_dir, &bdir.join("case"), &others)?;
+        for e in &entries[lo..hi] {
+            if let bronchosim::io::poses::FrameRef::Image(i) = &e.frame {
+                std::fs::remove_file(bdir.join("case/frames").join(i.file_name().unwrap()))?;
+            }
+        }
+        build_model(&bdir.join("case"), &bdir.join("model"), build_opts)?;
+        let model = Model::load(&bdir.join("model"))?;
+        let light = model.calibrated().expect("calibrated light");
+        let reg = FrameRegistrar::new(
+            ModelParts {
+                scene: &model.scene,
+                tri_uv: &model.tri_uv,
+                texture: Some(&model.texture),
+                light,
+                camera: &model.manifest.camera,
+            },
+            RegistrationOptions {
+                uniform_albedo_from_level: usize::MAX,
+                ..opts.clone()
+            },
+        )?;
+        let v = refine_video(
+            &reg,
+            &frames[lo..hi],
+            &gains[lo..hi],
+            None,
+            &current[lo..hi],
+            &VideoOptions::default(),
+        )?;
+        match &mut all {
+            None => all = Some(v),
+            Some(a) => {
+                a.frames.extend(v.frames);
+                a.measured.extend(v.measured);
+                a.restarted += v.restarted;
+                for (key, c) in v.counts {
+                    *a.counts.entry(key).or_default() += c;
+                }
+            }
+        }
+    }
+    all.ok_or_else(|| anyhow::anyhow!("no blocks"))
+}
+
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let case_dir = PathBuf::from(&args[0]);
@@ -171,6 +247,9 @@ fn main() -> anyhow::Result<()> {
     let mut final_model = true;
     // Kind of each round: G (geometry, colour albedo) or T (texture); overrides rounds/first.
     let mut kinds: Option<Vec<bool>> = None;
+    // Rounds (1-based) registered block by block against a texture fused without the block.
+    let mut block_rounds: Vec<usize> = Vec::new();
+    let mut blocks = 4usize;
     for kv in &args[2..] {
         match kv.split_once('=') {
             Some(("rounds", v)) => rounds = v.parse()?,
@@ -181,7 +260,16 @@ fn main() -> anyhow::Result<()> {
             Some(("sigma", v)) => frame_opts.relative_sigma = v.parse()?,
             Some(("huber", v)) => frame_opts.huber = v.parse()?,
             Some(("final", v)) => final_model = v == "yes",
-            Some(("kinds", v)) => kinds = Some(v.chars().map(|c| c == 'G').collect()),
+            Some(("kinds", v)) => {
+                kinds = Some(v.chars().map(|c| c == 'G').collect());
+                block_rounds = v
+                    .chars()
+                    .enumerate()
+                    .filter(|(_, c)| *c == 'B')
+                    .map(|(i, _)| i + 1)
+                    .collect();
+            }
+            Some(("blocks", v)) => blocks = v.parse()?,
             Some(("gain", v)) => frame_opts.estimate_gain = v == "yes",
             Some(("sat", v)) => frame_opts.saturation_level = v.parse()?,
             Some(("coarsest", v)) => frame_opts.coarsest_level = v.parse()?,
@@ -250,7 +338,7 @@ fn main() -> anyhow::Result<()> {
                 light,
                 camera: &model.manifest.camera,
             },
-            opts,
+            opts.clone(),
         )?;
         let t = Instant::now();
         let current = poses_of(&entries);
@@ -267,14 +355,28 @@ fn main() -> anyhow::Result<()> {
         } else {
             &frames
         };
-        let v = refine_video(
-            &reg,
-            frames_used,
-            &light.gains,
-            None,
-            &current,
-            &VideoOptions::default(),
-        )?;
+        let v = if block_rounds.contains(&r) {
+            refine_by_blocks(
+                &case_dir,
+                &dir,
+                &entries,
+                &frames,
+                &light.gains,
+                &current,
+                blocks,
+                &build_opts,
+                &opts,
+            )?
+        } else {
+            refine_video(
+                &reg,
+                frames_used,
+                &light.gains,
+                None,
+                &current,
+                &VideoOptions::default(),
+            )?
+        };
         let t_reg = t.elapsed().as_secs_f64();
         let smoothed: Vec<Affine> = v.frames.iter().map(|f| f.pose).collect();
         write_errors(&dir.join("errors.csv"), &v.measured, &smoothed, &truth)?;

@@ -85,6 +85,10 @@ pub struct BuildOptions {
     /// texture rounds measures that again from poses the texture rounds made consistent
     /// (BENCHMARKS.md, issue 16).
     pub registration_geometry_every: usize,
+    /// A geometry round is run again (within `registration_rounds`) while more than this share
+    /// of its frames are outliers, their corrections departing from their neighbours': the
+    /// texture fused after it would follow their errors (1 or more: never).
+    pub registration_geometry_repeat_share: f64,
     /// Gain corrections of the light fitted in each registration round (the light's shape is
     /// not refitted there: the rounds only need a light to register against).
     pub registration_light_refinements: usize,
@@ -170,6 +174,10 @@ impl Default for BuildOptions {
             // three rounds 0.144 mm / 0.685 deg, 76; six 0.126 mm / 0.363 deg, 77, +5 s).
             registration_rounds: 5,
             registration_geometry_every: 3,
+            // From tracker poses 3 mm / 4 deg off, the demo phantom's first geometry round
+            // leaves 37 of 80 frames outliers, a second one 8; from 1.5 mm / 2 deg 10, and a
+            // second round there was no better (BENCHMARKS.md, issue 16, session 12).
+            registration_geometry_repeat_share: 0.25,
             registration_tolerance_mm: 0.05,
             registration_light_refinements: 0,
             tracking: Default::default(),
