@@ -9,9 +9,7 @@ use bronchosim::math::Affine;
 use bronchosim::model::Model;
 use bronchosim::phantom::pose_noise::{tracker_poses, PoseNoise};
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
-use bronchosim::registration::{
-    pose_error, FrameObs, FrameRegistrar, ModelParts, RegistrationOptions,
-};
+use bronchosim::registration::{pose_error, FrameObs, FrameRegistrar, RegistrationOptions};
 use bronchosim::shading::ShadingKind;
 use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -49,13 +47,7 @@ fn bench(c: &mut Criterion) {
     let truth: Vec<Affine> = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
     let start = tracker_poses(&truth, &PoseNoise::new(1.5, 2.0), 7)[f];
     let reg = FrameRegistrar::new(
-        ModelParts {
-            scene: &model.scene,
-            tri_uv: &model.tri_uv,
-            texture: Some(&model.texture),
-            light,
-            camera: &model.manifest.camera,
-        },
+        model.registration_parts().unwrap(),
         RegistrationOptions::default(),
     )
     .unwrap();

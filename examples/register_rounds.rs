@@ -30,8 +30,7 @@ use bronchosim::model::Model;
 use bronchosim::registration::chroma::ChromaAlbedo;
 use bronchosim::registration::photometric::RayGrid;
 use bronchosim::registration::{
-    pose_error, pose_error_axes, refine_video, FrameRegistrar, ModelParts, RegistrationOptions,
-    VideoOptions,
+    pose_error, pose_error_axes, refine_video, FrameRegistrar, RegistrationOptions, VideoOptions,
 };
 use bronchosim::shading::ShadingKind;
 use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
@@ -196,15 +195,8 @@ fn refine_by_blocks(
         }
         build_model(&bdir.join("case"), &bdir.join("model"), build_opts)?;
         let model = Model::load(&bdir.join("model"))?;
-        let light = model.calibrated().expect("calibrated light");
         let reg = FrameRegistrar::new(
-            ModelParts {
-                scene: &model.scene,
-                tri_uv: &model.tri_uv,
-                texture: Some(&model.texture),
-                light,
-                camera: &model.manifest.camera,
-            },
+            model.registration_parts().expect("calibrated light"),
             RegistrationOptions {
                 uniform_albedo_from_level: usize::MAX,
                 ..opts.clone()
@@ -331,13 +323,7 @@ fn main() -> anyhow::Result<()> {
             ..frame_opts.clone()
         };
         let reg = FrameRegistrar::new(
-            ModelParts {
-                scene: &model.scene,
-                tri_uv: &model.tri_uv,
-                texture: Some(&model.texture),
-                light,
-                camera: &model.manifest.camera,
-            },
+            model.registration_parts().expect("calibrated light"),
             opts.clone(),
         )?;
         let t = Instant::now();

@@ -15,8 +15,8 @@ use bronchosim::phantom::pose_noise::PoseNoise;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::registration::prior::MeasurementNoise;
 use bronchosim::registration::{
-    apply_delta, pose_error, register_round, FrameStatus, ModelParts, PoseDelta, RoundKind,
-    RoundOptions, VideoRegistration,
+    apply_delta, pose_error, register_round, FrameStatus, PoseDelta, RoundKind, RoundOptions,
+    VideoRegistration,
 };
 use bronchosim::shading::ShadingKind;
 use bronchosim::texture::synthesis::{SynthesisOptions, UnseenMode};
@@ -105,26 +105,24 @@ fn register_with(
     kind: RoundKind,
     opts: &RoundOptions,
 ) -> VideoRegistration {
-    let light = model.calibrated().unwrap();
-    let parts = ModelParts {
-        scene: &model.scene,
-        tri_uv: &model.tri_uv,
-        texture: Some(&model.texture),
-        light,
-        camera: &model.manifest.camera,
-    };
-    register_round(parts, frames, &light.gains, None, poses, kind, opts).unwrap()
+    let parts = model.registration_parts().unwrap();
+    register_round(parts, frames, &parts.light.gains, None, poses, kind, opts).unwrap()
 }
 
 /// A 24-frame 160x160 phantom in `dir`/case whose poses carry a tracker's error (1.5 mm / 2
 /// degrees RMS), and the case opened.
 fn tracker_phantom(dir: &Path) -> (std::path::PathBuf, Case) {
+    phantom_with_pose_noise(dir, PoseNoise::new(1.5, 2.0))
+}
+
+/// A 24-frame 160x160 phantom in `dir`/case whose poses carry `noise`, and the case opened.
+fn phantom_with_pose_noise(dir: &Path, noise: PoseNoise) -> (std::path::PathBuf, Case) {
     let case_dir = dir.join("case");
     let opts = PhantomOptions {
         frames: 24,
         width: 160,
         height: 160,
-        pose_noise: PoseNoise::new(1.5, 2.0),
+        pose_noise: noise,
         ..Default::default()
     };
     write_phantom_case(&case_dir, &opts).unwrap();
@@ -376,16 +374,7 @@ fn build_repeats_a_geometry_round_that_leaves_many_outliers() {
     // and a texture fused after it follows their errors.
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let case_dir = dir.join("case");
-    let opts = PhantomOptions {
-        frames: 24,
-        width: 160,
-        height: 160,
-        pose_noise: PoseNoise::new(3.0, 4.0),
-        ..Default::default()
-    };
-    write_phantom_case(&case_dir, &opts).unwrap();
-    let case = Case::open(&case_dir).unwrap();
+    let (case_dir, case) = phantom_with_pose_noise(dir, PoseNoise::new(3.0, 4.0));
     let truth: Vec<Affine> = read_poses(&case_dir.join("truth/poses.json"), &case_dir)
         .unwrap()
         .iter()

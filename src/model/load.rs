@@ -160,6 +160,18 @@ impl Model {
         }
     }
 
+    /// What a frame is registered against ([`crate::registration`]): the mesh, the texture,
+    /// the calibrated light and the camera; `None` when the model's shading is not calibrated.
+    pub fn registration_parts(&self) -> Option<crate::registration::ModelParts<'_>> {
+        Some(crate::registration::ModelParts {
+            scene: &self.scene,
+            tri_uv: &self.tri_uv,
+            texture: Some(&self.texture),
+            light: self.calibrated()?,
+            camera: &self.manifest.camera,
+        })
+    }
+
     /// The inputs of [`crate::render::render_view`] for the paper's method: Psi of the fitted
     /// viewpoints and the paper's texture, also when the model's shading is calibrated.
     pub fn paper_render_inputs(&self) -> RenderInputs<'_> {
