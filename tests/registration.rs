@@ -382,38 +382,34 @@ fn build_repeats_a_geometry_round_that_leaves_many_outliers() {
         .collect();
     let given: Vec<Affine> = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
     let (mm0, deg0, _) = errors(&given, &truth);
-    let run = |share: f64, out: &str| {
-        let opts = BuildOptions {
-            cross_validate_every: 0,
-            shading: Some(ShadingKind::Calibrated),
-            poses: PosesMode::Refine,
-            registration_rounds: 2,
-            registration_geometry_repeat_share: share,
-            quiet: true,
-            ..Default::default()
-        };
-        let m = build_model(&case_dir, &dir.join(out), &opts).unwrap();
-        let reg = m.registration.expect("model.json records the registration");
-        let refined: Vec<Affine> = read_poses(&dir.join(out).join("poses.json"), &case_dir)
-            .unwrap()
-            .iter()
-            .map(|p| p.pose.camera_to_world)
-            .collect();
-        let kinds: Vec<String> = reg.rounds.iter().map(|r| r.against.clone()).collect();
-        let first_outliers = reg.rounds[0].counts.get("outlier").copied().unwrap_or(0);
-        (kinds, first_outliers, errors(&refined, &truth))
+    let out = dir.join("model");
+    let opts = BuildOptions {
+        cross_validate_every: 0,
+        shading: Some(ShadingKind::Calibrated),
+        poses: PosesMode::Refine,
+        registration_rounds: 2,
+        quiet: true,
+        ..Default::default()
     };
-    let (kinds, outliers, (mm, deg, within)) = run(0.25, "repeat");
-    let (kinds1, _, (mm1, deg1, within1)) = run(1.0, "once");
+    let m = build_model(&case_dir, &out, &opts).unwrap();
+    let reg = m.registration.expect("model.json records the registration");
+    let refined: Vec<Affine> = read_poses(&out.join("poses.json"), &case_dir)
+        .unwrap()
+        .iter()
+        .map(|p| p.pose.camera_to_world)
+        .collect();
+    let kinds: Vec<&str> = reg.rounds.iter().map(|r| r.against.as_str()).collect();
+    let outliers = reg.rounds[0].counts.get("outlier").copied().unwrap_or(0);
+    let (mm, deg, within) = errors(&refined, &truth);
     println!(
-        "3 mm / 4 deg: {mm0:.3} mm {deg0:.3} deg; first round {outliers} outliers; {kinds:?} -> {mm:.3} mm {deg:.3} deg, {within} within; {kinds1:?} -> {mm1:.3} mm {deg1:.3} deg, {within1} within"
+        "3 mm / 4 deg: {mm0:.3} mm {deg0:.3} deg; first round {outliers} outliers; {kinds:?} -> {mm:.3} mm {deg:.3} deg, {within} within"
     );
     assert!(
         4 * outliers > 24,
         "{outliers} outliers after the first round"
     );
     assert_eq!(kinds, ["geometry", "geometry"]);
-    assert_eq!(kinds1, ["geometry", "texture"]);
-    // Measured: 1.11 mm / 1.87 deg against 2.32 mm / 2.86 deg.
-    assert!(mm < 0.65 * mm1 && deg < 0.8 * deg1, "{mm} mm {deg} deg");
+    // Measured from 2.64 mm / 3.41 deg: 1.11 mm / 1.87 deg; without the repeat (geometry, then
+    // texture: `registration_geometry_repeat_share` 1) 2.32 mm / 2.86 deg, which fails this.
+    assert!(mm < 0.5 * mm0 && deg < 0.65 * deg0, "{mm} mm {deg} deg");
 }
