@@ -10,7 +10,7 @@ use bronchosim::image::Frame;
 use bronchosim::io::case::Case;
 use bronchosim::io::poses::{read_poses, write_poses, FrameRef, PoseEntry};
 use bronchosim::math::{Affine, Vector3};
-use bronchosim::model::Model;
+use bronchosim::model::{Model, ModelManifest};
 use bronchosim::phantom::pose_noise::PoseNoise;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::registration::prior::MeasurementNoise;
@@ -107,6 +107,19 @@ fn register_with(
 ) -> VideoRegistration {
     let parts = model.registration_parts().unwrap();
     register_round(parts, frames, &parts.light.gains, None, poses, kind, opts).unwrap()
+}
+
+/// `build` with two registration rounds and no cross-validation (the refined poses are kept).
+fn build_refined(case: &Path, out: &Path) -> ModelManifest {
+    let opts = BuildOptions {
+        cross_validate_every: 0,
+        shading: Some(ShadingKind::Calibrated),
+        poses: PosesMode::Refine,
+        registration_rounds: 2,
+        quiet: true,
+        ..Default::default()
+    };
+    build_model(case, out, &opts).unwrap()
 }
 
 /// A 24-frame 160x160 phantom in `dir`/case whose poses carry a tracker's error (1.5 mm / 2
@@ -239,15 +252,7 @@ fn build_refines_tracker_poses_and_leaves_a_wrong_one_out() {
     let (mm0, deg0, _) = errors(&given, &truth);
 
     let out = dir.join("model");
-    let build_opts = BuildOptions {
-        cross_validate_every: 0,
-        shading: Some(ShadingKind::Calibrated),
-        poses: PosesMode::Refine,
-        registration_rounds: 2,
-        quiet: true,
-        ..Default::default()
-    };
-    let m = build_model(&noisy, &out, &build_opts).unwrap();
+    let m = build_refined(&noisy, &out);
     let reg = m
         .registration
         .as_ref()
@@ -383,15 +388,7 @@ fn build_repeats_a_geometry_round_that_leaves_many_outliers() {
     let given: Vec<Affine> = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
     let (mm0, deg0, _) = errors(&given, &truth);
     let out = dir.join("model");
-    let opts = BuildOptions {
-        cross_validate_every: 0,
-        shading: Some(ShadingKind::Calibrated),
-        poses: PosesMode::Refine,
-        registration_rounds: 2,
-        quiet: true,
-        ..Default::default()
-    };
-    let m = build_model(&case_dir, &out, &opts).unwrap();
+    let m = build_refined(&case_dir, &out);
     let reg = m.registration.expect("model.json records the registration");
     let refined: Vec<Affine> = read_poses(&out.join("poses.json"), &case_dir)
         .unwrap()
