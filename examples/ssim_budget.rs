@@ -30,14 +30,8 @@ fn read_linear(path: &Path) -> bronchosim::Result<Frame> {
     Ok(f)
 }
 
-/// Per pixel of one view: the model's albedo, light and additive part, and the truth's linear
-/// image and albedo (`None` where the model's ray misses or the truth has no albedo).
-struct ViewParts {
-    width: u32,
-    height: u32,
-    pixels: Vec<Option<PixelParts>>,
-}
-
+/// One pixel of a view: the model's albedo, light and additive part, and the truth's linear
+/// image and albedo.
 #[derive(Clone, Copy)]
 struct PixelParts {
     model_albedo: [f64; 3],
@@ -62,7 +56,8 @@ fn main() -> bronchosim::Result<()> {
     let pm = PhotometricModel::new(parts)?;
     let grid = RayGrid::new(&camera, 0, 1);
     let (views, references) = load_truth(truth)?;
-    let mut all = Vec::new();
+    // Per view and pixel; `None` where the model's ray misses or the truth has no albedo.
+    let mut all: Vec<Vec<Option<PixelParts>>> = Vec::new();
     for view in &views {
         let stem = view.path.with_extension("");
         let stem = stem.to_string_lossy();
@@ -89,17 +84,13 @@ fn main() -> bronchosim::Result<()> {
                 true_albedo: ta,
             });
         }
-        all.push(ViewParts {
-            width: camera.width,
-            height: camera.height,
-            pixels,
-        });
+        all.push(pixels);
     }
     // The model's albedo is relative: its scale against the true one, per channel.
     let kappa: [f64; 3] = std::array::from_fn(|k| {
         let mut r: Vec<f64> = all
             .iter()
-            .flat_map(|v| v.pixels.iter().flatten())
+            .flat_map(|v| v.iter().flatten())
             .map(|p| p.model_albedo[k] / p.true_albedo[k])
             .collect();
         let mid = r.len() / 2;
@@ -108,9 +99,9 @@ fn main() -> bronchosim::Result<()> {
     let compose = |f: &dyn Fn(&PixelParts, usize) -> f64| -> Vec<MaskedImage> {
         all.iter()
             .map(|v| {
-                let mut frame = Frame::new(v.width, v.height);
-                let mask: Vec<bool> = v.pixels.iter().map(Option::is_some).collect();
-                for (i, p) in v.pixels.iter().enumerate() {
+                let mut frame = Frame::new(camera.width, camera.height);
+                let mask: Vec<bool> = v.iter().map(Option::is_some).collect();
+                for (i, p) in v.iter().enumerate() {
                     if let Some(p) = p {
                         for k in 0..3 {
                             frame.rgb[3 * i + k] = f(p, k) as f32;

@@ -244,7 +244,8 @@ pub struct BuildArgs {
     #[arg(long, value_enum, default_value_t = build_defaults().poses)]
     pub poses: PosesMode,
     /// Most rounds of the registration (light + texture, then every frame's pose); rounds
-    /// 0, N, 2N, ... (N = --geometry-every) register against the CT's geometry alone.
+    /// 0, N, 2N, ... (N = --geometry-every) register against the CT's geometry alone, and so
+    /// does the round after a geometry round that leaves over a quarter of the frames outliers.
     #[arg(long, default_value_t = build_defaults().registration_rounds)]
     pub registration_rounds: usize,
     /// Every N-th registration round registers against the geometry again: the texture
@@ -271,7 +272,8 @@ pub struct RegisterArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Most rounds (light + texture, then every frame's pose); rounds 0, N, 2N, ...
-    /// (N = --geometry-every) register against the CT's geometry alone.
+    /// (N = --geometry-every) register against the CT's geometry alone, and so does the round
+    /// after a geometry round that leaves over a quarter of the frames outliers.
     #[arg(long, default_value_t = build_defaults().registration_rounds)]
     pub rounds: usize,
     /// Every N-th round registers against the geometry again: the texture cannot see an error

@@ -170,7 +170,7 @@ impl Default for BuildOptions {
             // poses the given ones are kept (33.17 dB, unchanged); +48 s of build.
             poses: PosesMode::Refine,
             // Geometry, texture, texture, geometry, texture (1.5 mm / 2 deg on the demo
-            // phantom: 0.157 mm / 0.404 deg median, 77 of 80 frames within 1 mm and 1 deg;
+            // phantom: 0.158 mm / 0.350 deg median, 75 of 80 frames within 1 mm and 1 deg;
             // three rounds 0.144 mm / 0.685 deg, 76; six 0.126 mm / 0.363 deg, 77, +5 s).
             registration_rounds: 5,
             registration_geometry_every: 3,

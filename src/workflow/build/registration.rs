@@ -256,11 +256,7 @@ fn run_rounds(
             && summary.median_step_mm < opts.registration_tolerance_mm
             && summary.median_step_deg < 0.1;
         repeat_geometry = kind == RoundKind::Geometry
-            && !geometry_settled(
-                &summary,
-                frames_done.len(),
-                opts.registration_geometry_repeat_share,
-            );
+            && !geometry_settled(&frames_done, opts.registration_geometry_repeat_share);
         rounds.push(summary);
         *statuses = frames_done
             .iter()
@@ -281,9 +277,12 @@ fn run_rounds(
 /// fused after one geometry round follows its outliers' errors (demo phantom: 1.00 mm /
 /// 3.03 deg median, 6 of 80 frames within 1 mm and 1 deg, against 0.29 mm / 0.74 deg, 51 of
 /// 80, with the geometry round repeated).
-fn geometry_settled(summary: &RoundSummary, frames: usize, max_share: f64) -> bool {
-    let outliers = summary.counts.get("outlier").copied().unwrap_or(0);
-    outliers as f64 <= max_share * frames as f64
+fn geometry_settled(frames: &[FrameRegistration], max_share: f64) -> bool {
+    let outliers = frames
+        .iter()
+        .filter(|f| f.status == FrameStatus::Outlier)
+        .count();
+    outliers as f64 <= max_share * frames.len() as f64
 }
 
 /// One round: light and consensus texture at the scene's current poses, then every frame
