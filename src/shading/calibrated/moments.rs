@@ -321,94 +321,195 @@ pub(crate) fn cost(lay: &Layout, m: &[FrameMoments], p: &[f64]) -> f64 {
 }
 
 /// Gauss–Newton matrix `H = sum J^T G J` and half-gradient `J^T (G y - h)` over all
-/// parameters (dense; a few hundred parameters at most), and the cost.
+/// parameters (dense; a few hundred parameters at most), and the cost. The frames' shares are
+/// computed in parallel and added in frame order, so the result does not depend on the
+/// threads.
 pub(crate) fn normal_equations(
     lay: &Layout,
     m: &[FrameMoments],
     p: &[f64],
 ) -> (DMatrix<f64>, DVector<f64>, f64) {
     let np = lay.len();
-    let d = lay.d();
+    let shares: Vec<[LocalTerms; 3]> = m
+        .par_iter()
+        .enumerate()
+        .map(|(f, fm)| std::array::from_fn(|c| local_terms(lay, fm, p, f, c)))
+        .collect();
     let mut hm = DMatrix::zeros(np, np);
     let mut grad = DVector::zeros(np);
     let mut total = 0.0;
-    for (f, fm) in m.iter().enumerate() {
-        let gf = p[lay.g_off() + f];
-        for c in 0..3 {
-            let y = y_of(lay, p, fm.light, f, c);
-            let gm = fm.g(c);
-            let gy = gm * &y;
-            total += y.dot(&gy) - 2.0 * fm.h[c].dot(&y) + fm.s[c];
-            let r = gy - &fm.h[c];
-            // Local Jacobian dy/dparams: rho_c, s_1.., g_f, a_fc.
-            let mut idx: Vec<usize> = (0..lay.nr).map(|j| lay.c_off(c) + j).collect();
-            idx.extend((1..lay.ns).map(|k| lay.e_off() + k - 1));
-            idx.push(lay.g_off() + f);
-            if lay.ambient {
-                idx.push(lay.a_off() + 3 * f + c);
-            }
-            if lay.interreflection {
-                idx.push(lay.k_off() + c);
-            }
-            if lay.gathered {
-                idx.push(lay.q_off() + c);
-            }
-            if lay.specular.is_some() {
-                idx.push(lay.k_idx(c));
-            }
-            let mut jac = DMatrix::zeros(d + lay.extra(), idx.len());
-            // Columns: rho (nr), s_1.. (ns - 1), g_f, then the optional ones in idx's order.
-            let col_g = lay.nr + lay.ns - 1;
-            let mut next = col_g + 1 + usize::from(lay.ambient);
-            let col_kappa = next;
-            next += usize::from(lay.interreflection);
-            let col_q = next;
-            next += usize::from(lay.gathered);
-            let col_k = next;
-            let rho = &p[lay.c_off(c)..lay.c_off(c) + lay.nr];
-            for j in 0..lay.nr {
-                for k in 0..lay.ns {
-                    let e = if k == 0 { 1.0 } else { p[lay.e_off() + k - 1] };
-                    let row = j * lay.ns + k;
-                    jac[(row, j)] = gf * e;
-                    if k > 0 {
-                        jac[(row, lay.nr + k - 1)] = gf * rho[j];
-                    }
-                    jac[(row, lay.nr + lay.ns - 1)] = rho[j] * e;
-                }
-            }
-            if lay.ambient {
-                jac[(d, lay.nr + lay.ns)] = 1.0;
-            }
-            if lay.interreflection {
-                jac[(d, col_kappa)] = fm.light;
-            }
-            if lay.gathered {
-                jac[(d + 1, col_g)] = p[lay.q_off() + c];
-                jac[(d + 1, col_q)] = gf;
-            }
-            if lay.specular.is_some() {
-                let kc = p[lay.k_idx(c)];
-                let sp = lay.spec_feature();
-                for k in 0..lay.ns {
-                    let e = if k == 0 { 1.0 } else { p[lay.e_off() + k - 1] };
-                    jac[(sp + k, col_k)] = gf * e;
-                    jac[(sp + k, col_g)] = kc * e;
-                    if k > 0 {
-                        jac[(sp + k, lay.nr + k - 1)] = gf * kc;
-                    }
-                }
-            }
-            let gj = gm * &jac;
-            let hl = jac.transpose() * gj;
-            let gl = jac.transpose() * r;
-            for (a, &ia) in idx.iter().enumerate() {
-                grad[ia] += gl[a];
-                for (b, &ib) in idx.iter().enumerate() {
-                    hm[(ia, ib)] += hl[(a, b)];
-                }
+    for t in shares.iter().flatten() {
+        total += t.cost;
+        let n = t.idx.len();
+        for (a, &ia) in t.idx.iter().enumerate() {
+            grad[ia] += t.gl[a];
+            for (b, &ib) in t.idx.iter().enumerate() {
+                hm[(ia, ib)] += t.hl[a * n + b];
             }
         }
     }
     (hm, grad, total.max(0.0))
+}
+
+/// Frame f, channel c's share of the normal equations: the parameters its coefficients
+/// depend on, its block of `J^T G J` (row-major) and of `J^T (G y - h)`, and its cost.
+struct LocalTerms {
+    idx: Vec<usize>,
+    hl: Vec<f64>,
+    gl: Vec<f64>,
+    cost: f64,
+}
+
+fn local_terms(lay: &Layout, fm: &FrameMoments, p: &[f64], f: usize, c: usize) -> LocalTerms {
+    let d = lay.d();
+    let d1 = d + lay.extra();
+    let gf = p[lay.g_off() + f];
+    let y = y_of(lay, p, fm.light, f, c);
+    let gm = fm.g(c);
+    let gy = gm * &y;
+    let cost = y.dot(&gy) - 2.0 * fm.h[c].dot(&y) + fm.s[c];
+    let r = gy - &fm.h[c];
+    // Local Jacobian dy/dparams, columns: rho_c (nr), s_1.. (ns - 1), g_f, then the optional
+    // ones in idx's order. It is sparse (each coefficient of y depends on a few parameters),
+    // so it is kept as (row, column, value) entries.
+    let mut idx: Vec<usize> = (0..lay.nr).map(|j| lay.c_off(c) + j).collect();
+    idx.extend((1..lay.ns).map(|k| lay.e_off() + k - 1));
+    idx.push(lay.g_off() + f);
+    if lay.ambient {
+        idx.push(lay.a_off() + 3 * f + c);
+    }
+    if lay.interreflection {
+        idx.push(lay.k_off() + c);
+    }
+    if lay.gathered {
+        idx.push(lay.q_off() + c);
+    }
+    if lay.specular.is_some() {
+        idx.push(lay.k_idx(c));
+    }
+    let col_g = lay.nr + lay.ns - 1;
+    let mut next = col_g + 1 + usize::from(lay.ambient);
+    let col_kappa = next;
+    next += usize::from(lay.interreflection);
+    let col_q = next;
+    next += usize::from(lay.gathered);
+    let col_k = next;
+    let mut jac: Vec<(usize, usize, f64)> = Vec::with_capacity(4 * d + 2 * lay.ns + 4);
+    let rho = &p[lay.c_off(c)..lay.c_off(c) + lay.nr];
+    for j in 0..lay.nr {
+        for k in 0..lay.ns {
+            let e = if k == 0 { 1.0 } else { p[lay.e_off() + k - 1] };
+            let row = j * lay.ns + k;
+            jac.push((row, j, gf * e));
+            if k > 0 {
+                jac.push((row, lay.nr + k - 1, gf * rho[j]));
+            }
+            jac.push((row, col_g, rho[j] * e));
+        }
+    }
+    if lay.ambient {
+        jac.push((d, lay.nr + lay.ns, 1.0));
+    }
+    if lay.interreflection {
+        jac.push((d, col_kappa, fm.light));
+    }
+    if lay.gathered {
+        jac.push((d + 1, col_g, p[lay.q_off() + c]));
+        jac.push((d + 1, col_q, gf));
+    }
+    if lay.specular.is_some() {
+        let kc = p[lay.k_idx(c)];
+        let sp = lay.spec_feature();
+        for k in 0..lay.ns {
+            let e = if k == 0 { 1.0 } else { p[lay.e_off() + k - 1] };
+            jac.push((sp + k, col_k, gf * e));
+            jac.push((sp + k, col_g, kc * e));
+            if k > 0 {
+                jac.push((sp + k, lay.nr + k - 1, gf * kc));
+            }
+        }
+    }
+    let n = idx.len();
+    // G J (d1 x n, column-major): G is symmetric, so its column `row` is its row `row`.
+    let mut gj = vec![0.0; d1 * n];
+    for &(row, col, v) in &jac {
+        let g_col = gm.column(row);
+        for (out, &g) in gj[col * d1..(col + 1) * d1].iter_mut().zip(g_col.iter()) {
+            *out += g * v;
+        }
+    }
+    let mut hl = vec![0.0; n * n];
+    let mut gl = vec![0.0; n];
+    for &(row, col, v) in &jac {
+        gl[col] += v * r[row];
+        for b in 0..n {
+            hl[col * n + b] += v * gj[b * d1 + row];
+        }
+    }
+    LocalTerms { idx, hl, gl, cost }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    /// The sparse local Jacobians against a numerical one of `y_of`, every optional term on:
+    /// `H = sum J^T G J` and `J^T (G y - h)`, and the cost against `cost`.
+    #[test]
+    fn normal_equations_match_a_numerical_jacobian() {
+        let lay = Layout {
+            nr: 3,
+            ns: 3,
+            frames: 4,
+            ambient: true,
+            interreflection: true,
+            gathered: true,
+            specular: Some(0.3),
+            spec_colours: 1,
+        };
+        let mut rng = SplitMix64::new(7);
+        let d1 = lay.d() + lay.extra();
+        let m: Vec<FrameMoments> = (0..lay.frames)
+            .map(|_| {
+                let g = (0..3)
+                    .map(|_| {
+                        let a = DMatrix::from_fn(d1, d1, |_, _| rng.uniform() - 0.5);
+                        &a * a.transpose()
+                    })
+                    .collect();
+                FrameMoments {
+                    g,
+                    h: std::array::from_fn(|_| DVector::from_fn(d1, |_, _| rng.uniform())),
+                    s: [10.0, 11.0, 12.0],
+                    light: 0.4 + rng.uniform(),
+                }
+            })
+            .collect();
+        let p: Vec<f64> = (0..lay.len()).map(|_| 0.2 + rng.uniform()).collect();
+        let (h, grad, total) = normal_equations(&lay, &m, &p);
+        let np = lay.len();
+        let mut h_ref = DMatrix::<f64>::zeros(np, np);
+        let mut g_ref = DVector::<f64>::zeros(np);
+        for (f, fm) in m.iter().enumerate() {
+            for c in 0..3 {
+                let y = y_of(&lay, &p, fm.light, f, c);
+                let jac = DMatrix::from_fn(d1, np, |r, k| {
+                    let (mut hi, mut lo) = (p.clone(), p.clone());
+                    hi[k] += 1e-6;
+                    lo[k] -= 1e-6;
+                    (y_of(&lay, &hi, fm.light, f, c)[r] - y_of(&lay, &lo, fm.light, f, c)[r]) / 2e-6
+                });
+                h_ref += jac.transpose() * fm.g(c) * &jac;
+                g_ref += jac.transpose() * (fm.g(c) * &y - &fm.h[c]);
+            }
+        }
+        let scale = h_ref.amax();
+        assert!((&h - &h_ref).amax() < 1e-6 * scale, "H differs");
+        assert!(
+            (&grad - &g_ref).amax() < 1e-6 * g_ref.amax(),
+            "gradient differs"
+        );
+        assert!((total - cost(&lay, &m, &p)).abs() < 1e-9 * total.abs().max(1.0));
+    }
 }
