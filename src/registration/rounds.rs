@@ -18,6 +18,7 @@ use super::video::{refine_video, VideoOptions, VideoRegistration};
 use crate::image::Frame;
 use crate::math::Affine;
 use crate::Result;
+use rayon::prelude::*;
 
 /// What a round registers against.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -101,7 +102,8 @@ pub fn register_round(
                 .collect();
             let rel = ChromaAlbedo::fit(&reg.model, &grid, &some)?;
             let level = reg.opts.saturation_level;
-            let normalised: Vec<Frame> = frames.iter().map(|f| rel.normalise(f, level)).collect();
+            let normalised: Vec<Frame> =
+                frames.par_iter().map(|f| rel.normalise(f, level)).collect();
             let mut video = opts.video.clone();
             if let Some(prior) = &mut video.smooth {
                 prior.noise = opts.geometry_noise;

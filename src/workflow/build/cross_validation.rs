@@ -22,6 +22,7 @@ use crate::shading::paper::{PsiLookup, PsiModel};
 use crate::shading::{FittedShading, ShadingKind};
 use crate::texture::fusion::fuse;
 use crate::Result;
+use rayon::prelude::*;
 
 /// The held-out frames: every `every`-th frame starting at `every / 2`, at most `max` of them
 /// (evenly thinned), so that both neighbours of each are training frames.
@@ -88,12 +89,13 @@ pub fn cross_validate(
             psi_lookup: PsiLookup::Nearest,
             ..Default::default()
         };
-        let mut scores = Vec::new();
-        for (i, frame, mask) in &frames {
-            let (pred, hit) = render_view_with(&inputs, &view_rays, &scene.poses[*i], &render)?;
-            let number = scene.frame_numbers[*i];
-            scores.push(score_frame(kind, number, pred, hit, frame, mask)?);
-        }
+        let scores = frames
+            .par_iter()
+            .map(|(i, frame, mask)| {
+                let (pred, hit) = render_view_with(&inputs, &view_rays, &scene.poses[*i], &render)?;
+                score_frame(kind, scene.frame_numbers[*i], pred, hit, frame, mask)
+            })
+            .collect::<Result<Vec<_>>>()?;
         let mean = |f: &dyn Fn(&HeldOutScore) -> Option<f64>| {
             let v: Vec<f64> = scores.iter().filter_map(f).collect();
             (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
