@@ -18,6 +18,7 @@ use crate::shading::{density_weights, extract_samples, SampleSet, WeightOptions}
 use crate::workflow::progress::Progress;
 use crate::workflow::report::ReportFrame;
 use crate::Result;
+use rayon::prelude::*;
 
 /// What the first pass gives every later stage.
 pub struct FitPass {
@@ -66,59 +67,115 @@ pub fn fit_pass(scene: &mut BuildScene, opts: &BuildOptions) -> Result<(FitPass,
     };
     let report_every = (n / 3).max(1);
     let progress = Progress::new("fit Psi", n as u64, opts.quiet);
-    for (i, frame) in scene.case.frame_source()?.enumerate() {
-        let frame = scene.working_frame(frame?);
-        let pose = scene.poses[i];
-        let g = scene.cast(i);
-        let (samples, model, mut fit) =
-            fit_frame(&frame, &g, &pose, opts).map_err(|e| match e {
-                FrameFitError::Unusable(samples, excluded) => BuildError::FrameUnusable {
-                    frame: i,
-                    name: scene.frame_name(i),
-                    samples,
-                    excluded,
-                },
-                FrameFitError::Fit(e) => BuildError::FrameFit {
-                    frame: i,
-                    name: scene.frame_name(i),
-                    source: Box::new(e),
-                },
-            })?;
-        fit.frame = scene.frame_numbers[i];
-        for (ch, sum) in pass.pixel_sum.iter_mut().enumerate() {
-            *sum += samples.rgb[ch].iter().map(|&v| v as f64).sum::<f64>();
+    // Frames are decoded in order (a video is one stream) and fitted a batch at a time in
+    // parallel; the results are merged in frame order, so they do not depend on the threads.
+    let batch = 2 * rayon::current_num_threads().max(1);
+    let mut source = scene.case.frame_source()?.enumerate();
+    loop {
+        let frames: Vec<(usize, Result<Frame>)> = source.by_ref().take(batch).collect();
+        if frames.is_empty() {
+            break;
         }
-        if pool_for_light {
-            let data = FrameData {
-                gamma: &g.gamma,
-                z: &g.z,
-                cos_theta: &scene.cos_theta,
-                rgb: &frame.rgb,
-                texel: None,
-                width: frame.width as usize,
-            };
-            let part = pool_frames(&[data], &pool)?;
-            if opts.refine_light > 0 {
-                light.uv.extend(sample_uvs(&part.pixel, &g, &scene.tri_uv));
+        let scene_ref: &BuildScene = scene;
+        let fitted: Vec<Result<FittedFrame>> = frames
+            .into_par_iter()
+            .map(|(i, frame)| fit_one(scene_ref, i, frame?, opts, &pool, pool_for_light))
+            .collect();
+        for f in fitted {
+            let f = f?;
+            let i = f.index;
+            for (ch, sum) in pass.pixel_sum.iter_mut().enumerate() {
+                *sum += f.samples.rgb[ch].iter().map(|&v| v as f64).sum::<f64>();
             }
-            light.pooled.append(part)?;
+            if let Some(part) = f.pooled {
+                light.uv.extend(f.uv);
+                light.pooled.append(part)?;
+            }
+            scene.cache.offer(i, &f.gbuffer.z);
+            if i % report_every == 0 && pass.report_frames.len() < 3 {
+                pass.report_frames.push(ReportFrame {
+                    index: i,
+                    frame: f.frame,
+                    gbuffer: f.gbuffer,
+                    samples: f.samples,
+                    psi: f.psi.clone(),
+                });
+            }
+            pass.psi.push(f.psi);
+            pass.fits.push(f.fit);
+            progress.inc();
         }
-        scene.cache.offer(i, &g.z);
-        if i % report_every == 0 && pass.report_frames.len() < 3 {
-            pass.report_frames.push(ReportFrame {
-                index: i,
-                frame,
-                gbuffer: g,
-                samples,
-                psi: model.clone(),
-            });
-        }
-        pass.psi.push(model);
-        pass.fits.push(fit);
-        progress.inc();
     }
     progress.finish();
     Ok((pass, light))
+}
+
+/// One frame's share of the first pass.
+struct FittedFrame {
+    index: usize,
+    frame: Frame,
+    gbuffer: GBuffer,
+    samples: SampleSet,
+    psi: PsiModel,
+    fit: FrameFit,
+    /// The frame's samples pooled for the calibrated light, when it is fitted.
+    pooled: Option<PooledSamples>,
+    /// Where the pooled samples lie in the atlas (only when the light is refitted).
+    uv: Vec<[f32; 2]>,
+}
+
+/// Ray cast frame `i` (decoded as recorded), sample it and fit its Psi.
+fn fit_one(
+    scene: &BuildScene,
+    i: usize,
+    frame: Frame,
+    opts: &BuildOptions,
+    pool: &PoolOptions,
+    pool_for_light: bool,
+) -> Result<FittedFrame> {
+    let frame = scene.working_frame(frame);
+    let g = scene.cast(i);
+    let (samples, psi, mut fit) =
+        fit_frame(&frame, &g, &scene.poses[i], opts).map_err(|e| match e {
+            FrameFitError::Unusable(samples, excluded) => BuildError::FrameUnusable {
+                frame: i,
+                name: scene.frame_name(i),
+                samples,
+                excluded,
+            },
+            FrameFitError::Fit(e) => BuildError::FrameFit {
+                frame: i,
+                name: scene.frame_name(i),
+                source: Box::new(e),
+            },
+        })?;
+    fit.frame = scene.frame_numbers[i];
+    let (mut pooled, mut uv) = (None, Vec::new());
+    if pool_for_light {
+        let data = FrameData {
+            gamma: &g.gamma,
+            z: &g.z,
+            cos_theta: &scene.cos_theta,
+            rgb: &frame.rgb,
+            texel: None,
+            width: frame.width as usize,
+        };
+        let part = pool_frames(&[data], pool)?;
+        if opts.refine_light > 0 {
+            uv = sample_uvs(&part.pixel, &g, &scene.tri_uv);
+        }
+        pooled = Some(part);
+    }
+    Ok(FittedFrame {
+        index: i,
+        frame,
+        gbuffer: g,
+        samples,
+        psi,
+        fit,
+        pooled,
+        uv,
+    })
 }
 
 /// Why a frame could not be fitted.
