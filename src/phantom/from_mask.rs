@@ -5,6 +5,7 @@
 use crate::io::nifti::read_nifti;
 use crate::math::Vector4;
 use crate::rng::Pcg32;
+use crate::volume::filter::gaussian_blur;
 use crate::volume::morphology::dilate;
 use crate::volume::segment::{bounding_box, crop};
 use crate::volume::Volume;
@@ -115,7 +116,7 @@ pub fn ct_from_mask(mask: &Volume<f32>, opts: &FromMaskOptions) -> Result<MaskPh
     let mixed = mix_tissues(&frac, &wall, &body, opts);
     let mut ct = Volume::from_data(frac.dims, frac.affine, mixed)?;
     if opts.blur_sigma_voxels > 0.0 {
-        gaussian_blur(&mut ct, opts.blur_sigma_voxels);
+        gaussian_blur(&mut ct, [opts.blur_sigma_voxels; 3]);
     }
     let slice = frac.dims[0] * frac.dims[1];
     ct.data
@@ -270,38 +271,4 @@ fn block_average(m: &Volume<u8>, f: usize) -> Volume<f32> {
     }
     affine.fixed_view_mut::<4, 1>(0, 3).copy_from(&o);
     Volume { dims, affine, data }
-}
-
-/// Separable Gaussian blur in place, `sigma` in voxels along every axis, edges clamped.
-pub(crate) fn gaussian_blur(v: &mut Volume<f32>, sigma: f64) {
-    let r = (3.0 * sigma).ceil() as i64;
-    let mut kern: Vec<f32> = (-r..=r)
-        .map(|x| (-(x * x) as f64 / (2.0 * sigma * sigma)).exp() as f32)
-        .collect();
-    let s: f32 = kern.iter().sum();
-    kern.iter_mut().for_each(|k| *k /= s);
-    let [nx, ny, _] = v.dims;
-    let strides = [1usize, nx, nx * ny];
-    for (axis, &stride) in strides.iter().enumerate() {
-        let n = v.dims[axis];
-        let src = v.data.clone();
-        // Every voxel reads its line in `src`: independent, so parallel over slices.
-        v.data
-            .par_chunks_mut(nx * ny)
-            .enumerate()
-            .for_each(|(k, out)| {
-                for j in 0..ny {
-                    for i in 0..nx {
-                        let c = [i, j, k][axis] as i64;
-                        let base = i + nx * (j + ny * k) - c as usize * stride;
-                        let mut acc = 0.0;
-                        for (t, &w) in kern.iter().enumerate() {
-                            let p = (c + t as i64 - r).clamp(0, n as i64 - 1) as usize;
-                            acc += w * src[base + p * stride];
-                        }
-                        out[i + nx * j] = acc;
-                    }
-                }
-            });
-    }
 }

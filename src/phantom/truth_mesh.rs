@@ -107,7 +107,7 @@ pub fn tree_truth_mesh(
 pub fn mask_truth_mesh(mask: &Volume<u8>, max_triangles: usize) -> Result<TriMesh> {
     // Values below the level are inside for marching cubes: use 1 - mask.
     let mut v = mask.map(|m| if m != 0 { 0.0f32 } else { 1.0 });
-    super::from_mask::gaussian_blur(&mut v, 0.7);
+    crate::volume::filter::gaussian_blur(&mut v, [0.7; 3]);
     let mut mesh = marching_cubes(&v, 0.5, None)?;
     taubin(&mut mesh, &TaubinOptions::default())?;
     limit_triangles(mesh, max_triangles)

@@ -2,6 +2,7 @@
 
 pub mod branches;
 pub mod error;
+pub mod filter;
 pub mod geodesic;
 mod grid;
 pub mod marching_cubes;
