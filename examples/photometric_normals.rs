@@ -163,27 +163,29 @@ fn main() -> bronchosim::Result<()> {
     let r = (k.len() / 2) as i64;
     for pass in 0..2 {
         let src = acc.clone();
-        acc.par_chunks_mut(ACC * aw).enumerate().for_each(|(y, row)| {
-            for x in 0..aw {
-                let mut s = [0.0; ACC];
-                for (ti, &wk) in k.iter().enumerate() {
-                    let d = ti as i64 - r;
-                    let (xx, yy) = if pass == 0 {
-                        (x as i64 + d, y as i64)
-                    } else {
-                        (x as i64, y as i64 + d)
-                    };
-                    if xx < 0 || yy < 0 || xx >= aw as i64 || yy >= ah as i64 {
-                        continue;
+        acc.par_chunks_mut(ACC * aw)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for x in 0..aw {
+                    let mut s = [0.0; ACC];
+                    for (ti, &wk) in k.iter().enumerate() {
+                        let d = ti as i64 - r;
+                        let (xx, yy) = if pass == 0 {
+                            (x as i64 + d, y as i64)
+                        } else {
+                            (x as i64, y as i64 + d)
+                        };
+                        if xx < 0 || yy < 0 || xx >= aw as i64 || yy >= ah as i64 {
+                            continue;
+                        }
+                        let o = ACC * (yy as usize * aw + xx as usize);
+                        for a in 0..ACC {
+                            s[a] += wk * src[o + a];
+                        }
                     }
-                    let o = ACC * (yy as usize * aw + xx as usize);
-                    for a in 0..ACC {
-                        s[a] += wk * src[o + a];
-                    }
+                    row[ACC * x..ACC * (x + 1)].copy_from_slice(&s);
                 }
-                row[ACC * x..ACC * (x + 1)].copy_from_slice(&s);
-            }
-        });
+            });
     }
     // Solve per texel, the tilt damped by lambda times the texel's weight.
     let tilt: Vec<[f64; 2]> = acc
@@ -194,7 +196,15 @@ fn main() -> bronchosim::Result<()> {
             }
             let d = lambda * a[0];
             let m = nalgebra::Matrix3::new(
-                a[0], a[1], a[2], a[1], a[3] + d, a[4], a[2], a[4], a[5] + d,
+                a[0],
+                a[1],
+                a[2],
+                a[1],
+                a[3] + d,
+                a[4],
+                a[2],
+                a[4],
+                a[5] + d,
             );
             let b = nalgebra::Vector3::new(a[6], a[7], a[8]);
             match m.cholesky() {
@@ -225,7 +235,14 @@ fn main() -> bronchosim::Result<()> {
     let names = ["mesh normals", "photometric normals", "true normals"];
     // Per view, per compared pixel: (pixel, camera-frame point, the three normals in the
     // camera frame, true albedo, model albedo, the view's offset).
-    type Px = (usize, Vector3<f64>, [Vector3<f64>; 3], [f64; 3], [f32; 3], [f64; 3]);
+    type Px = (
+        usize,
+        Vector3<f64>,
+        [Vector3<f64>; 3],
+        [f64; 3],
+        [f32; 3],
+        [f64; 3],
+    );
     let mut per_view: Vec<Vec<Px>> = Vec::new();
     let mut angle_sum = [0.0f64; 2];
     let mut angle_n = 0usize;
@@ -261,7 +278,14 @@ fn main() -> bronchosim::Result<()> {
             angle_sum[0] += n0.dot(&tn).clamp(-1.0, 1.0).acos().to_degrees();
             angle_sum[1] += n_ph.dot(&tn).clamp(-1.0, 1.0).acos().to_degrees();
             angle_n += 1;
-            pixels.push((i, r * (q.x - c), [r * n0, r * n_ph, r * tn], ta, q.albedo, mv.offset));
+            pixels.push((
+                i,
+                r * (q.x - c),
+                [r * n0, r * n_ph, r * tn],
+                ta,
+                q.albedo,
+                mv.offset,
+            ));
         }
         per_view.push(pixels);
     }
