@@ -12,33 +12,25 @@
 //!
 //! `cargo run --release --example photometric_normals -- MODEL CASE [SIGMA LAMBDA]`
 
+#[path = "common/truth_surface.rs"]
+mod truth_surface;
+
 use std::path::Path;
 
 use bronchosim::camera::pose::camera_centre;
-use bronchosim::image::srgb::linear_to_srgb;
 use bronchosim::image::Frame;
 use bronchosim::io::camera_file::read_camera;
 use bronchosim::io::case::Case;
-use bronchosim::io::mesh_export::read_ply;
-use bronchosim::io::png::read_png;
 use bronchosim::math::{Affine, Vector3};
 use bronchosim::model::Model;
-use bronchosim::raycast::{cast_frame_with, Scene};
-use bronchosim::registration::photometric::{ModelParts, PhotometricModel, RayGrid};
+use bronchosim::raycast::cast_frame_with;
+use bronchosim::registration::photometric::{PhotometricModel, RayGrid};
 use bronchosim::registration::pose::rotation_of;
 use bronchosim::render::evaluate::{evaluate_methods, MaskedImage};
 use bronchosim::render::views_io::load_truth;
 use bronchosim::shading::LUMA;
 use rayon::prelude::*;
-
-/// A linear PNG of the truth (`code / 65535`), which `read_png` decodes as sRGB.
-fn read_linear(path: &Path) -> bronchosim::Result<Frame> {
-    let mut f = read_png(path)?;
-    for v in &mut f.rgb {
-        *v = linear_to_srgb(*v);
-    }
-    Ok(f)
-}
+use truth_surface::{both_views, read_view_image, TrueSurface};
 
 /// Two unit tangents of `n`, the same for the same normal.
 fn tangents(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
@@ -220,14 +212,8 @@ fn main() -> bronchosim::Result<()> {
     // Score in the truth views: the model's light with the mesh's, the tilted and the true
     // normals, times the true albedo.
     let truth = Path::new(&args[2]).join("truth");
-    let true_scene = Scene::new(&read_ply(&truth.join("lumen.ply"))?)?;
-    let true_tri_uv = vec![[[0.0f32; 2]; 3]; true_scene.triangle_count()];
-    let true_pm = PhotometricModel::new(ModelParts {
-        scene: &true_scene,
-        tri_uv: &true_tri_uv,
-        texture: None,
-        ..parts
-    })?;
+    let true_surface = TrueSurface::read(&truth)?;
+    let true_pm = true_surface.model(parts)?;
     let (views, references) = load_truth(&truth)?;
     // The truth views' own camera (undistorted), not the video's.
     let camera = &read_camera(&truth.join("camera.json"))?;
@@ -247,18 +233,11 @@ fn main() -> bronchosim::Result<()> {
     let mut angle_sum = [0.0f64; 2];
     let mut angle_n = 0usize;
     for view in &views {
-        let stem = view.path.with_extension("");
-        let stem = stem.to_string_lossy();
-        let true_albedo = read_linear(Path::new(&format!("{stem}_albedo.png")))?;
+        let true_albedo = read_view_image(view, "albedo", camera)?;
         let pose = view.camera_to_world;
         let (r, c) = (rotation_of(&pose).transpose(), camera_centre(&pose).coords);
-        let mv = pm.view(&vgrid, &pose, 0.0);
-        let tv = true_pm.view(&vgrid, &pose, 0.0);
+        let (mv, tv, on_true) = both_views(&pm, &true_pm, &vgrid, &pose);
         let g = cast_frame_with(parts.scene, &vgrid.rays, &pose);
-        let mut on_true = vec![None; (camera.width * camera.height) as usize];
-        for (k, q) in tv.points.iter().enumerate() {
-            on_true[q.ray as usize] = Some(k);
-        }
         let mut pixels = Vec::new();
         for q in &mv.points {
             let i = q.ray as usize;

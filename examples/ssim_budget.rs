@@ -13,33 +13,24 @@
 //!
 //! `cargo run --release --example ssim_budget -- MODEL_DIR CASE_DIR/truth [CASE_DIR/ct.nii.gz]`
 
+#[path = "common/truth_surface.rs"]
+mod truth_surface;
+
 use std::path::Path;
 
 use bronchosim::camera::pose::camera_centre;
-use bronchosim::image::srgb::linear_to_srgb;
 use bronchosim::image::Frame;
 use bronchosim::io::camera_file::read_camera;
-use bronchosim::io::mesh_export::read_ply;
 use bronchosim::io::nifti::read_nifti;
-use bronchosim::io::png::read_png;
 use bronchosim::math::Vector3;
 use bronchosim::model::Model;
-use bronchosim::raycast::Scene;
-use bronchosim::registration::photometric::{ModelParts, PhotometricModel, RayGrid};
+use bronchosim::registration::photometric::{PhotometricModel, RayGrid};
 use bronchosim::registration::pose::rotation_of;
 use bronchosim::render::evaluate::{evaluate_methods, MaskedImage};
 use bronchosim::render::views_io::load_truth;
 use bronchosim::volume::filter::{gaussian_blur_mm, gradient_world};
 use bronchosim::volume::Volume;
-
-/// A linear PNG of the truth (`code / 65535`), which `read_png` decodes as sRGB.
-fn read_linear(path: &Path) -> bronchosim::Result<Frame> {
-    let mut f = read_png(path)?;
-    for v in &mut f.rgb {
-        *v = linear_to_srgb(*v);
-    }
-    Ok(f)
-}
+use truth_surface::{both_views, read_view_image, TrueSurface};
 
 /// One pixel of a view: the model's albedo, light and additive part, and the truth's linear
 /// image and albedo.
@@ -105,34 +96,18 @@ fn main() -> bronchosim::Result<()> {
         .registration_parts()
         .ok_or_else(|| bronchosim::Error::Other("the model has no calibrated light".into()))?;
     let pm = PhotometricModel::new(parts)?;
-    let true_scene = Scene::new(&read_ply(&truth.join("lumen.ply"))?)?;
-    let true_tri_uv = vec![[[0.0f32; 2]; 3]; true_scene.triangle_count()];
-    let true_pm = PhotometricModel::new(ModelParts {
-        scene: &true_scene,
-        tri_uv: &true_tri_uv,
-        texture: None,
-        ..parts
-    })?;
+    let true_surface = TrueSurface::read(truth)?;
+    let true_pm = true_surface.model(parts)?;
     let grid = RayGrid::new(&camera, 0, 1);
     let (views, references) = load_truth(truth)?;
     // Per view and pixel; `None` where the model's ray misses or the truth has no albedo.
     let mut all: Vec<Vec<Option<PixelParts>>> = Vec::new();
     for view in &views {
-        let stem = view.path.with_extension("");
-        let stem = stem.to_string_lossy();
-        let true_image = read_linear(Path::new(&format!("{stem}_linear.png")))?;
-        let true_albedo = read_linear(Path::new(&format!("{stem}_albedo.png")))?;
+        let true_image = read_view_image(view, "linear", &camera)?;
+        let true_albedo = read_view_image(view, "albedo", &camera)?;
         let pose = view.camera_to_world;
         let (r, c) = (rotation_of(&pose).transpose(), camera_centre(&pose).coords);
-        let mv = pm.view(&grid, &pose, 0.0);
-        let tv = true_pm.view(&grid, &pose, 0.0);
-        let on_true: Vec<Option<usize>> = {
-            let mut at = vec![None; (camera.width * camera.height) as usize];
-            for (k, q) in tv.points.iter().enumerate() {
-                at[q.ray as usize] = Some(k);
-            }
-            at
-        };
+        let (mv, tv, on_true) = both_views(&pm, &true_pm, &grid, &pose);
         let mut pixels = vec![None; (camera.width * camera.height) as usize];
         for q in &mv.points {
             let i = q.ray as usize;
