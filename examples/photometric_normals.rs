@@ -10,7 +10,7 @@
 //! surface in the truth views (the model's light times the true albedo, as `ssim_budget`), and
 //! their angle to the true surface's normals is compared with the mesh's.
 //!
-//! `cargo run --release --example photometric_normals -- MODEL CASE [SIGMA LAMBDA]`
+//! `cargo run --release --example photometric_normals -- MODEL CASE [SIGMA LAMBDA [WIDE]]`
 
 #[path = "common/truth_surface.rs"]
 mod truth_surface;
@@ -74,6 +74,7 @@ fn main() -> bronchosim::Result<()> {
     let case = Case::open(Path::new(&args[2]))?;
     let sigma: f64 = args.get(3).map_or(Ok(1.5), |s| s.parse()).unwrap_or(1.5);
     let lambda: f64 = args.get(4).map_or(Ok(0.05), |s| s.parse()).unwrap_or(0.05);
+    let wide: f64 = args.get(5).map_or(Ok(0.0), |s| s.parse()).unwrap_or(0.0);
     let parts = model
         .registration_parts()
         .ok_or_else(|| bronchosim::Error::Other("the model has no calibrated light".into()))?;
@@ -145,69 +146,19 @@ fn main() -> bronchosim::Result<()> {
             }
         }
     }
-    // Smooth the normal equations over the atlas (a Gaussian of `sigma` texels).
-    let k: Vec<f64> = {
-        let r = (3.0 * sigma).ceil() as i64;
-        (-r..=r)
-            .map(|x| (-(x * x) as f64 / (2.0 * sigma * sigma)).exp())
+    // The tilt at the texels' scale; with WIDE, less the tilt at that wider scale: the light
+    // model's own error varies slowly over the surface and tilts every normal of a region
+    // alike, the relief the mesh misses (rings, facets) does not.
+    let fine = solve_tilts(&smooth(&acc, aw, ah, sigma), lambda);
+    let tilt: Vec<[f64; 2]> = if wide > 0.0 {
+        let broad = solve_tilts(&smooth(&acc, aw, ah, wide), lambda);
+        fine.iter()
+            .zip(&broad)
+            .map(|(f, b)| [f[0] - b[0], f[1] - b[1]])
             .collect()
+    } else {
+        fine
     };
-    let r = (k.len() / 2) as i64;
-    for pass in 0..2 {
-        let src = acc.clone();
-        acc.par_chunks_mut(ACC * aw)
-            .enumerate()
-            .for_each(|(y, row)| {
-                for x in 0..aw {
-                    let mut s = [0.0; ACC];
-                    for (ti, &wk) in k.iter().enumerate() {
-                        let d = ti as i64 - r;
-                        let (xx, yy) = if pass == 0 {
-                            (x as i64 + d, y as i64)
-                        } else {
-                            (x as i64, y as i64 + d)
-                        };
-                        if xx < 0 || yy < 0 || xx >= aw as i64 || yy >= ah as i64 {
-                            continue;
-                        }
-                        let o = ACC * (yy as usize * aw + xx as usize);
-                        for a in 0..ACC {
-                            s[a] += wk * src[o + a];
-                        }
-                    }
-                    row[ACC * x..ACC * (x + 1)].copy_from_slice(&s);
-                }
-            });
-    }
-    // Solve per texel, the tilt damped by lambda times the texel's weight.
-    let tilt: Vec<[f64; 2]> = acc
-        .par_chunks(ACC)
-        .map(|a| {
-            if a[0] <= 0.0 {
-                return [0.0; 2];
-            }
-            let d = lambda * a[0];
-            let m = nalgebra::Matrix3::new(
-                a[0],
-                a[1],
-                a[2],
-                a[1],
-                a[3] + d,
-                a[4],
-                a[2],
-                a[4],
-                a[5] + d,
-            );
-            let b = nalgebra::Vector3::new(a[6], a[7], a[8]);
-            match m.cholesky() {
-                Some(ch) => {
-                    let x = ch.solve(&b);
-                    [x[1].clamp(-0.6, 0.6), x[2].clamp(-0.6, 0.6)]
-                }
-                None => [0.0; 2],
-            }
-        })
-        .collect();
 
     // Score in the truth views: the model's light with the mesh's, the tilted and the true
     // normals, times the true albedo.
@@ -302,7 +253,7 @@ fn main() -> bronchosim::Result<()> {
         }
     }
     println!(
-        "sigma {sigma} texels, lambda {lambda}: mean angle to the true normals: mesh {:.2} deg, photometric {:.2} deg",
+        "sigma {sigma} texels, lambda {lambda}, wide {wide}: mean angle to the true normals: mesh {:.2} deg, photometric {:.2} deg",
         angle_sum[0] / angle_n as f64,
         angle_sum[1] / angle_n as f64
     );
@@ -319,4 +270,74 @@ fn main() -> bronchosim::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The per-texel normal equations smoothed over the atlas by a Gaussian of `sigma` texels.
+fn smooth(acc: &[f64], aw: usize, ah: usize, sigma: f64) -> Vec<f64> {
+    let k: Vec<f64> = {
+        let r = (3.0 * sigma).ceil() as i64;
+        (-r..=r)
+            .map(|x| (-(x * x) as f64 / (2.0 * sigma * sigma)).exp())
+            .collect()
+    };
+    let r = (k.len() / 2) as i64;
+    let mut acc = acc.to_vec();
+    for pass in 0..2 {
+        let src = acc.clone();
+        acc.par_chunks_mut(ACC * aw)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for x in 0..aw {
+                    let mut s = [0.0; ACC];
+                    for (ti, &wk) in k.iter().enumerate() {
+                        let d = ti as i64 - r;
+                        let (xx, yy) = if pass == 0 {
+                            (x as i64 + d, y as i64)
+                        } else {
+                            (x as i64, y as i64 + d)
+                        };
+                        if xx < 0 || yy < 0 || xx >= aw as i64 || yy >= ah as i64 {
+                            continue;
+                        }
+                        let o = ACC * (yy as usize * aw + xx as usize);
+                        for a in 0..ACC {
+                            s[a] += wk * src[o + a];
+                        }
+                    }
+                    row[ACC * x..ACC * (x + 1)].copy_from_slice(&s);
+                }
+            });
+    }
+    acc
+}
+
+/// Each texel's tilt (u, v) from its normal equations, damped by `lambda` times its weight.
+fn solve_tilts(acc: &[f64], lambda: f64) -> Vec<[f64; 2]> {
+    acc.par_chunks(ACC)
+        .map(|a| {
+            if a[0] <= 0.0 {
+                return [0.0; 2];
+            }
+            let d = lambda * a[0];
+            let m = nalgebra::Matrix3::new(
+                a[0],
+                a[1],
+                a[2],
+                a[1],
+                a[3] + d,
+                a[4],
+                a[2],
+                a[4],
+                a[5] + d,
+            );
+            let b = nalgebra::Vector3::new(a[6], a[7], a[8]);
+            match m.cholesky() {
+                Some(ch) => {
+                    let x = ch.solve(&b);
+                    [x[1].clamp(-0.6, 0.6), x[2].clamp(-0.6, 0.6)]
+                }
+                None => [0.0; 2],
+            }
+        })
+        .collect()
 }
