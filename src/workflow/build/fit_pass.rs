@@ -69,7 +69,8 @@ pub fn fit_pass(scene: &mut BuildScene, opts: &BuildOptions) -> Result<(FitPass,
     let progress = Progress::new("fit Psi", n as u64, opts.quiet);
     // Frames are decoded in order (a video is one stream) and fitted a batch at a time in
     // parallel; the results are merged in frame order, so they do not depend on the threads.
-    let batch = 2 * rayon::current_num_threads().max(1);
+    // At most 16 frames are in flight (a 1280x720 frame with its G-buffer is about 25 MB).
+    let batch = (2 * rayon::current_num_threads()).clamp(2, 16);
     let mut source = scene.case.frame_source()?.enumerate();
     loop {
         let frames: Vec<(usize, Result<Frame>)> = source.by_ref().take(batch).collect();
