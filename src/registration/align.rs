@@ -75,24 +75,54 @@ fn huber(e: f64, k: f64) -> (f64, f64) {
     }
 }
 
+/// The frame and the model at each of a level's points, at the pose they were rendered from:
+/// what [`LevelProblem::set_reference`] and [`LevelProblem::set_model_gradient`] both read, so
+/// that each point is projected, sampled and shaded there once.
+pub struct AtRendered {
+    /// The frame's value and gradient where the point projects, when usable.
+    obs: Vec<Option<super::pyramid::Sample>>,
+    /// The model's light at the point (unit gain, without the offset).
+    radiance: Vec<[f64; 3]>,
+    /// Distance of the point from the camera (mm).
+    depth: Vec<f64>,
+}
+
 impl LevelProblem<'_> {
-    /// Fix the points' expected errors and reference costs at `pose`, where they were
-    /// rendered: `sigma = (relative x observed + floor) / weight` per channel, from the
-    /// frame's value there. From the observation, not the prediction: a sigma that grew with the prediction
-    /// would reward poses that predict the frame brighter.
+    /// The frame and the model at each point at `pose` (where the points were rendered).
+    pub fn at_rendered(&self, pose: &Affine) -> AtRendered {
+        let (r, c) = (rotation_of(pose).transpose(), camera_centre(pose).coords);
+        let n = self.points.len();
+        let mut at = AtRendered {
+            obs: Vec::with_capacity(n),
+            radiance: Vec::with_capacity(n),
+            depth: Vec::with_capacity(n),
+        };
+        for q in &self.points {
+            let p = r * (q.x - c);
+            at.obs.push(self.observe(&p));
+            at.radiance
+                .push(self.light.radiance(&p, &(r * q.n), q.albedo));
+            at.depth.push(p.norm());
+        }
+        at
+    }
+
+    /// Fix the points' expected errors and reference costs where they were rendered (`at`,
+    /// gain `log_k`): `sigma = (relative x observed + floor) / weight` per channel, from the
+    /// frame's value there. From the observation, not the prediction: a sigma that grew with
+    /// the prediction would reward poses that predict the frame brighter.
     pub fn set_reference(
         &mut self,
-        pose: &Affine,
+        at: &AtRendered,
         log_k: f64,
         relative: f64,
         floor: f64,
         channel_weights: [f32; 3],
     ) {
-        let (r, c) = (rotation_of(pose).transpose(), camera_centre(pose).coords);
-        self.inv_sigma = self
-            .points
+        self.inv_sigma = at
+            .obs
             .iter()
-            .map(|q| match self.observe(&(r * (q.x - c))) {
+            .map(|obs| match obs {
                 Some((obs, _, _)) => std::array::from_fn(|ch| {
                     let v = f64::from(obs[ch]).max(0.0);
                     channel_weights[ch] / (relative * v + floor) as f32
@@ -100,33 +130,28 @@ impl LevelProblem<'_> {
                 None => [0.0; 3],
             })
             .collect();
-        self.ref_cost = self.point_costs(pose, log_k);
+        self.ref_cost = self.point_costs(at, log_k);
     }
 
     /// Fix the gradient of the model's image at each point, from its neighbours on the
     /// render grid (`index`: point per grid ray, `grid_width` rays per row, `stride` level
-    /// pixels apart). A neighbour across a depth step of more than a tenth is not used (an
-    /// occluding edge does not move with the surface); a point without neighbours on an
-    /// axis has no gradient along it.
+    /// pixels apart), where the points were rendered (`at`, gain `log_k`). A neighbour across
+    /// a depth step of more than a tenth is not used (an occluding edge does not move with the
+    /// surface); a point without neighbours on an axis has no gradient along it.
     pub fn set_model_gradient(
         &mut self,
+        at: &AtRendered,
         index: &[u32],
         grid_width: usize,
         stride: usize,
-        pose: &Affine,
         log_k: f64,
     ) {
-        let (r, c) = (rotation_of(pose).transpose(), camera_centre(pose).coords);
         let k = log_k.exp();
-        let values: Vec<([f64; 3], f64)> = self
-            .points
+        let values: Vec<([f64; 3], f64)> = at
+            .radiance
             .iter()
-            .map(|q| {
-                let p = r * (q.x - c);
-                let s = self.light.radiance(&p, &(r * q.n), q.albedo);
-                let m = std::array::from_fn(|ch| k * (s[ch] + self.offset[ch]));
-                (m, p.norm())
-            })
+            .zip(&at.depth)
+            .map(|(s, &z)| (std::array::from_fn(|ch| k * (s[ch] + self.offset[ch])), z))
             .collect();
         let rows = index.len() / grid_width.max(1);
         let neighbour = |ray: usize, dx: isize, dy: isize, z: f64| -> Option<usize> {
@@ -175,20 +200,18 @@ impl LevelProblem<'_> {
             .filter(|(obs, _, _)| obs.iter().fold(0.0f32, |a, &v| a.max(v)) >= self.dark)
     }
 
-    /// Each point's robust cost over its channels at `pose` (NaN where it is not usable):
-    /// the reference for [`LevelProblem::ref_cost`].
-    pub fn point_costs(&self, pose: &Affine, log_k: f64) -> Vec<f32> {
-        let (r, c) = (rotation_of(pose).transpose(), camera_centre(pose).coords);
+    /// Each point's robust cost over its channels where it was rendered (`at`, gain `log_k`;
+    /// NaN where it is not usable): the reference for [`LevelProblem::ref_cost`].
+    fn point_costs(&self, at: &AtRendered, log_k: f64) -> Vec<f32> {
         let k = log_k.exp();
-        self.points
+        at.obs
             .iter()
+            .zip(&at.radiance)
             .zip(&self.inv_sigma)
-            .map(|(q, inv_sigma)| {
-                let p = r * (q.x - c);
-                let Some((obs, _, _)) = self.observe(&p) else {
+            .map(|((obs, s), inv_sigma)| {
+                let Some((obs, _, _)) = obs else {
                     return f32::NAN;
                 };
-                let s = self.light.radiance(&p, &(r * q.n), q.albedo);
                 (0..3)
                     .map(|ch| {
                         let m = k * (s[ch] + self.offset[ch]);

@@ -78,10 +78,11 @@ impl FrameRegistrar<'_> {
         } else {
             [1.0; 3]
         };
-        prob.set_reference(pose, log_k, o.relative_sigma, floor, weights);
+        let at = prob.at_rendered(pose);
+        prob.set_reference(&at, log_k, o.relative_sigma, floor, weights);
         if o.grad_blend > 0.0 {
             let stride = self.grids[level].stride;
-            prob.set_model_gradient(&index, grid_width, stride, pose, log_k);
+            prob.set_model_gradient(&at, &index, grid_width, stride, log_k);
         }
         let lin = prob.evaluate(pose, log_k, true);
         if lin.used < o.min_points {
