@@ -88,7 +88,8 @@ pub struct AtRendered {
 }
 
 impl LevelProblem<'_> {
-    /// The frame and the model at each point at `pose` (where the points were rendered).
+    /// The frame and the model at each point at `pose`, the pose the points were rendered
+    /// from (their radiance is the render's).
     pub fn at_rendered(&self, pose: &Affine) -> AtRendered {
         let (r, c) = (rotation_of(pose).transpose(), camera_centre(pose).coords);
         let n = self.points.len();
@@ -100,8 +101,7 @@ impl LevelProblem<'_> {
         for q in &self.points {
             let p = r * (q.x - c);
             at.obs.push(self.observe(&p));
-            at.radiance
-                .push(self.light.radiance(&p, &(r * q.n), q.albedo));
+            at.radiance.push(q.radiance);
             at.depth.push(p.norm());
         }
         at
@@ -225,6 +225,22 @@ impl LevelProblem<'_> {
     /// Cost and (when `with_normal_equations`) the normal equations at `pose` with gain
     /// factor `exp(log_k)`.
     pub fn evaluate(&self, pose: &Affine, log_k: f64, with_normal_equations: bool) -> Linearised {
+        self.evaluate_with(pose, log_k, with_normal_equations, None)
+    }
+
+    /// [`LevelProblem::evaluate`] with normal equations at the pose the points were rendered
+    /// from, reading the frame's samples already taken there (`at`).
+    pub fn evaluate_at_rendered(&self, at: &AtRendered, pose: &Affine, log_k: f64) -> Linearised {
+        self.evaluate_with(pose, log_k, true, Some(at))
+    }
+
+    fn evaluate_with(
+        &self,
+        pose: &Affine,
+        log_k: f64,
+        with_normal_equations: bool,
+        at: Option<&AtRendered>,
+    ) -> Linearised {
         let cam = &self.image.camera;
         let (r, c) = (rotation_of(pose).transpose(), camera_centre(pose).coords);
         let k = log_k.exp();
@@ -243,7 +259,11 @@ impl LevelProblem<'_> {
                 continue;
             }
             let p = r * (q.x - c);
-            let Some((obs, gx, gy)) = self.observe(&p) else {
+            let observed = match at {
+                Some(at) => at.obs[i],
+                None => self.observe(&p),
+            };
+            let Some((obs, gx, gy)) = observed else {
                 out.cost += reference.unwrap_or(penalty);
                 continue;
             };

@@ -84,7 +84,7 @@ impl FrameRegistrar<'_> {
             let stride = self.grids[level].stride;
             prob.set_model_gradient(&at, &index, grid_width, stride, log_k);
         }
-        let lin = prob.evaluate(pose, log_k, true);
+        let lin = prob.evaluate_at_rendered(&at, pose, log_k);
         if lin.used < o.min_points {
             return Err(FrameStatus::TooFewPoints);
         }

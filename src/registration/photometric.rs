@@ -120,6 +120,9 @@ pub struct ModelPoint {
     pub n: Vector3<f64>,
     /// Relative albedo per channel (1 with a uniform albedo).
     pub albedo: [f32; 3],
+    /// What it sends back to the rendering camera at unit gain (the light times `albedo`,
+    /// without the view's offset).
+    pub radiance: [f64; 3],
     /// Index of the grid ray that found it (row-major over the grid).
     pub ray: u32,
 }
@@ -188,6 +191,7 @@ impl PhotometricModel<'_> {
                     x,
                     n,
                     albedo,
+                    radiance: s,
                     ray: i as u32,
                 });
             }
