@@ -169,10 +169,12 @@ impl Default for BuildOptions {
             // 1.5 mm / 2 degrees of tracker error, new views 20.38 -> 27.17 dB; with exact
             // poses the given ones are kept (33.17 dB, unchanged); +48 s of build.
             poses: PosesMode::Refine,
-            // Geometry, texture, texture, geometry, texture (1.5 mm / 2 deg on the demo
-            // phantom: 0.158 mm / 0.350 deg median, 75 of 80 frames within 1 mm and 1 deg;
-            // three rounds 0.144 mm / 0.685 deg, 76; six 0.126 mm / 0.363 deg, 77, +5 s).
-            registration_rounds: 5,
+            // Geometry, texture, texture, geometry, texture, texture (1.5 mm / 2 deg on the
+            // demo phantom: 0.122 mm / 0.362 deg median, 79 of 80 frames within 1 mm and 1 deg;
+            // five rounds 0.160 mm / 0.376 deg, 75; three 0.144 mm / 0.685 deg, 76). A geometry
+            // round brings back a shared pitch / yaw of about 0.25 deg that the two texture
+            // rounds after it take away (BENCHMARKS.md); the sixth costs 4 s of the demo.
+            registration_rounds: 6,
             registration_geometry_every: 3,
             // From tracker poses 3 mm / 4 deg off, the demo phantom's first geometry round
             // leaves 37 of 80 frames outliers, a second one 8; from 1.5 mm / 2 deg 10, and a
