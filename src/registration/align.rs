@@ -75,36 +75,30 @@ fn huber(e: f64, k: f64) -> (f64, f64) {
     }
 }
 
-/// The frame and the model at each of a level's points, at the pose they were rendered from:
-/// what [`LevelProblem::set_reference`] and [`LevelProblem::set_model_gradient`] both read, so
-/// that each point is projected, sampled and shaded there once.
+/// The frame at each of a level's points, at the pose they were rendered from (where their
+/// [`ModelPoint::radiance`] holds): what [`LevelProblem::set_reference`],
+/// [`LevelProblem::set_model_gradient`] and the first normal equations all read, so that each
+/// point is projected and sampled there once.
 pub struct AtRendered {
     /// The frame's value and gradient where the point projects, when usable.
     obs: Vec<Option<super::pyramid::Sample>>,
-    /// The model's light at the point (unit gain, without the offset).
-    radiance: Vec<[f64; 3]>,
     /// Distance of the point from the camera (mm).
     depth: Vec<f64>,
 }
 
 impl LevelProblem<'_> {
-    /// The frame and the model at each point at `pose`, the pose the points were rendered
-    /// from (their radiance is the render's).
+    /// The frame at each point at `pose`, the pose the points were rendered from.
     pub fn at_rendered(&self, pose: &Affine) -> AtRendered {
         let (r, c) = (rotation_of(pose).transpose(), camera_centre(pose).coords);
-        let n = self.points.len();
-        let mut at = AtRendered {
-            obs: Vec::with_capacity(n),
-            radiance: Vec::with_capacity(n),
-            depth: Vec::with_capacity(n),
-        };
-        for q in &self.points {
-            let p = r * (q.x - c);
-            at.obs.push(self.observe(&p));
-            at.radiance.push(q.radiance);
-            at.depth.push(p.norm());
-        }
-        at
+        let (obs, depth) = self
+            .points
+            .iter()
+            .map(|q| {
+                let p = r * (q.x - c);
+                (self.observe(&p), p.norm())
+            })
+            .unzip();
+        AtRendered { obs, depth }
     }
 
     /// Fix the points' expected errors and reference costs where they were rendered (`at`,
@@ -147,11 +141,14 @@ impl LevelProblem<'_> {
         log_k: f64,
     ) {
         let k = log_k.exp();
-        let values: Vec<([f64; 3], f64)> = at
-            .radiance
+        let values: Vec<([f64; 3], f64)> = self
+            .points
             .iter()
             .zip(&at.depth)
-            .map(|(s, &z)| (std::array::from_fn(|ch| k * (s[ch] + self.offset[ch])), z))
+            .map(|(q, &z)| {
+                let s = q.radiance;
+                (std::array::from_fn(|ch| k * (s[ch] + self.offset[ch])), z)
+            })
             .collect();
         let rows = index.len() / grid_width.max(1);
         let neighbour = |ray: usize, dx: isize, dy: isize, z: f64| -> Option<usize> {
@@ -206,12 +203,13 @@ impl LevelProblem<'_> {
         let k = log_k.exp();
         at.obs
             .iter()
-            .zip(&at.radiance)
+            .zip(&self.points)
             .zip(&self.inv_sigma)
-            .map(|((obs, s), inv_sigma)| {
+            .map(|((obs, q), inv_sigma)| {
                 let Some((obs, _, _)) = obs else {
                     return f32::NAN;
                 };
+                let s = q.radiance;
                 (0..3)
                     .map(|ch| {
                         let m = k * (s[ch] + self.offset[ch]);
