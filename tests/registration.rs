@@ -5,18 +5,20 @@
 //! --poses refine` registers a tracker's poses, leaves a wrong one out and records both, and
 //! repeats a geometry round that leaves many frames outliers (3 mm / 4 degree poses).
 
+use bronchosim::camera::pose::camera_centre;
 use bronchosim::camera::Pose;
 use bronchosim::image::Frame;
 use bronchosim::io::case::Case;
 use bronchosim::io::poses::{read_poses, write_poses, FrameRef, PoseEntry};
-use bronchosim::math::{Affine, Vector3};
+use bronchosim::math::{Affine, Rotation3, Vector3};
 use bronchosim::model::{Model, ModelManifest};
 use bronchosim::phantom::pose_noise::PoseNoise;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
+use bronchosim::registration::pose::{pose_from, rotation_log, rotation_of};
 use bronchosim::registration::prior::MeasurementNoise;
 use bronchosim::registration::{
-    apply_delta, pose_error, register_round, FrameStatus, PoseDelta, RoundKind, RoundOptions,
-    VideoRegistration,
+    apply_delta, pose_error, register_round, FrameStatus, PoseDelta, RegistrationOptions,
+    RoundKind, RoundOptions, VideoRegistration,
 };
 use bronchosim::shading::ShadingKind;
 use bronchosim::texture::synthesis::{SynthesisOptions, UnseenMode};
@@ -409,4 +411,80 @@ fn build_repeats_a_geometry_round_that_leaves_many_outliers() {
     // Measured from 2.64 mm / 3.41 deg: 1.11 mm / 1.87 deg; without the repeat (geometry, then
     // texture: `registration_geometry_repeat_share` 1) 2.32 mm / 2.86 deg, which fails this.
     assert!(mm < 0.5 * mm0 && deg < 0.65 * deg0, "{mm} mm {deg} deg");
+}
+
+/// Mean rotation error about the camera's own x axis (pitch, degrees) of `poses` against
+/// `truth`.
+fn mean_pitch_deg(poses: &[Affine], truth: &[Affine]) -> f64 {
+    let sum: f64 = poses
+        .iter()
+        .zip(truth)
+        .map(|(p, t)| {
+            let r = rotation_of(t).transpose() * rotation_of(p);
+            rotation_log(&r).x.to_degrees()
+        })
+        .sum();
+    sum / poses.len() as f64
+}
+
+#[test]
+fn texture_rounds_shrink_an_error_every_frame_shares() {
+    // Every pose turned 0.4 deg about its camera's x axis and the model fused at those poses:
+    // the texture follows the frames, and only how the shift differs between frames that see
+    // a wall from different distances says which way to turn them back.
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (case_dir, case) = tracker_phantom(dir);
+    let truth: Vec<Affine> = read_poses(&case_dir.join("truth/poses.json"), &case_dir)
+        .unwrap()
+        .iter()
+        .map(|p| p.pose.camera_to_world)
+        .collect();
+    let frames: Vec<Frame> = case.frame_source().unwrap().map(|f| f.unwrap()).collect();
+    let entries = case.poses.clone();
+    let turn = Rotation3::from_axis_angle(&Vector3::x_axis(), 0.4f64.to_radians()).into_inner();
+    let pitched: Vec<Affine> = truth
+        .iter()
+        .map(|t| pose_from(&(rotation_of(t) * turn), &camera_centre(t).coords))
+        .collect();
+    let start = mean_pitch_deg(&pitched, &truth);
+    case_with_poses(&case_dir, &dir.join("pitched"), &entries, &pitched);
+    let first = build(&dir.join("pitched"), &dir.join("pitched_model"));
+    // Rounds as the build runs them: the model fused at the poses, then every frame
+    // registered against it.
+    let rounds = |grad_blend: f32, label: &str| {
+        let opts = RoundOptions {
+            frame: RegistrationOptions {
+                grad_blend,
+                ..RegistrationOptions::default()
+            },
+            ..RoundOptions::default()
+        };
+        let mut poses = pitched.clone();
+        let mut pitch = Vec::new();
+        for r in 0..3 {
+            let fused_here;
+            let model = match r {
+                0 => &first,
+                _ => {
+                    let case = dir.join(format!("{label}_case_{r}"));
+                    case_with_poses(&case_dir, &case, &entries, &poses);
+                    fused_here = build(&case, &dir.join(format!("{label}_model_{r}")));
+                    &fused_here
+                }
+            };
+            let v = register_with(model, &frames, &poses, RoundKind::Texture, &opts);
+            poses = v.frames.iter().map(|f| f.pose).collect();
+            pitch.push(mean_pitch_deg(&poses, &truth));
+        }
+        pitch
+    };
+    let frame_gradient = rounds(RegistrationOptions::default().grad_blend, "frame");
+    let model_gradient = rounds(1.0, "model");
+    println!(
+        "shared pitch {start:.3} deg, after each round: {frame_gradient:.3?} deg (frame's gradient), {model_gradient:.3?} deg (model's)"
+    );
+    let (f, m) = (frame_gradient[2], model_gradient[2]);
+    assert!(f < 0.8 * start, "{f} deg");
+    assert!(f < m, "{f} vs {m} deg");
 }

@@ -55,9 +55,12 @@ pub struct RegistrationOptions {
     pub saturation_level: f32,
     /// Surface points seen more obliquely than this (cos of the angle) are not used.
     pub min_gamma: f32,
-    /// Weight of the model's image gradient in the Jacobian (0: the frame's, 1: the model's,
-    /// 0.5: both averaged); see [`super::align::LevelProblem::grad_blend`].
+    /// Weight of the model's image gradient in the Jacobian at levels against the texture
+    /// (0: the frame's, 1: the model's, 0.5: both averaged); see
+    /// [`super::align::LevelProblem::grad_blend`].
     pub grad_blend: f32,
+    /// The same at levels against the geometry's shading (from `uniform_albedo_from_level`).
+    pub geometry_grad_blend: f32,
     /// Fit a per-frame gain correction with the pose (the light's gains were fitted with the
     /// unrefined poses).
     pub estimate_gain: bool,
@@ -84,7 +87,17 @@ impl Default for RegistrationOptions {
             noise_floor: 0.004,
             saturation_level: 0.999,
             min_gamma: 0.1,
-            grad_blend: 1.0,
+            // Against the texture, the frame's own gradient: the exact Jacobian of the
+            // residual the steps between renders minimise. With the model's, texture rounds
+            // grow an error the frames share instead of shrinking it (demo phantom, every pose
+            // turned 0.4 deg in pitch, texture rounds alone: 0.52 deg after three, 0.86 after
+            // six; with the frame's 0.21 and 0.19), so where they end depends on when they
+            // stop. From 1.5 mm / 2 deg drift new views went 29.71 -> 30.64 dB (BENCHMARKS.md).
+            grad_blend: 0.0,
+            // Against the geometry the model's: the frames divided by their colour's albedo
+            // are noisy (1.5 mm / 2 deg: 30.64 dB with the model's gradient in the geometry
+            // rounds, 29.87 dB with both averaged there).
+            geometry_grad_blend: 1.0,
             estimate_gain: true,
             min_points: 100,
             step_tolerance: 2e-3,

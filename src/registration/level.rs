@@ -59,6 +59,12 @@ impl FrameRegistrar<'_> {
             ..
         } = view;
         let mut depth: Vec<f64> = points.iter().map(|q| (q.x - centre).norm()).collect();
+        // Levels against the geometry's shading and levels against the texture differ in
+        // which image gradient serves them best ([`super::frame::RegistrationOptions`]).
+        let grad_blend = match level >= o.uniform_albedo_from_level {
+            true => o.geometry_grad_blend,
+            false => o.grad_blend,
+        };
         let mid = depth.len() / 2;
         let median_depth = *depth.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
         let mut prob = LevelProblem {
@@ -71,7 +77,7 @@ impl FrameRegistrar<'_> {
             dark: floor as f32,
             ref_cost: Vec::new(),
             model_grad: Vec::new(),
-            grad_blend: o.grad_blend,
+            grad_blend,
         };
         let weights = if level >= o.uniform_albedo_from_level {
             o.uniform_channel_weights
@@ -80,7 +86,7 @@ impl FrameRegistrar<'_> {
         };
         let at = prob.at_rendered(pose);
         prob.set_reference(&at, log_k, o.relative_sigma, floor, weights);
-        if o.grad_blend > 0.0 {
+        if grad_blend > 0.0 {
             let stride = self.grids[level].stride;
             prob.set_model_gradient(&at, &index, grid_width, stride, log_k);
         }
