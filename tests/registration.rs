@@ -46,6 +46,15 @@ fn errors(poses: &[Affine], truth: &[Affine]) -> (f64, f64, usize) {
     )
 }
 
+/// The phantom case's true poses (truth/poses.json).
+fn true_poses(case_dir: &Path) -> Vec<Affine> {
+    read_poses(&case_dir.join("truth/poses.json"), case_dir)
+        .unwrap()
+        .iter()
+        .map(|p| p.pose.camera_to_world)
+        .collect()
+}
+
 /// A copy of `case` at `to` whose poses.json holds `poses` (other files hard-linked).
 fn case_with_poses(case: &Path, to: &Path, entries: &[PoseEntry], poses: &[Affine]) {
     std::fs::create_dir_all(to.join("frames")).unwrap();
@@ -151,11 +160,7 @@ fn tracker_errors_are_recovered_true_poses_kept_and_a_wrong_pose_flagged() {
     let dir = tmp.path();
     let (case_dir, case) = tracker_phantom(dir);
     let given: Vec<Affine> = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
-    let truth: Vec<Affine> = read_poses(&case_dir.join("truth/poses.json"), &case_dir)
-        .unwrap()
-        .iter()
-        .map(|p| p.pose.camera_to_world)
-        .collect();
+    let truth = true_poses(&case_dir);
     let frames: Vec<Frame> = case.frame_source().unwrap().map(|f| f.unwrap()).collect();
     let (mm0, deg0, _) = errors(&given, &truth);
     assert!(
@@ -234,11 +239,7 @@ fn build_refines_tracker_poses_and_leaves_a_wrong_one_out() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let (case_dir, case) = tracker_phantom(dir);
-    let truth: Vec<Affine> = read_poses(&case_dir.join("truth/poses.json"), &case_dir)
-        .unwrap()
-        .iter()
-        .map(|p| p.pose.camera_to_world)
-        .collect();
+    let truth = true_poses(&case_dir);
     // Frame 12's given pose 10 mm off along its own x axis.
     let mut given: Vec<Affine> = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
     let side = given[12].fixed_view::<3, 1>(0, 0).into_owned();
@@ -382,11 +383,7 @@ fn build_repeats_a_geometry_round_that_leaves_many_outliers() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let (case_dir, case) = phantom_with_pose_noise(dir, PoseNoise::new(3.0, 4.0));
-    let truth: Vec<Affine> = read_poses(&case_dir.join("truth/poses.json"), &case_dir)
-        .unwrap()
-        .iter()
-        .map(|p| p.pose.camera_to_world)
-        .collect();
+    let truth = true_poses(&case_dir);
     let given: Vec<Affine> = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
     let (mm0, deg0, _) = errors(&given, &truth);
     let out = dir.join("model");
@@ -435,11 +432,7 @@ fn texture_rounds_shrink_an_error_every_frame_shares() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let (case_dir, case) = tracker_phantom(dir);
-    let truth: Vec<Affine> = read_poses(&case_dir.join("truth/poses.json"), &case_dir)
-        .unwrap()
-        .iter()
-        .map(|p| p.pose.camera_to_world)
-        .collect();
+    let truth = true_poses(&case_dir);
     let frames: Vec<Frame> = case.frame_source().unwrap().map(|f| f.unwrap()).collect();
     let entries = case.poses.clone();
     let turn = Rotation3::from_axis_angle(&Vector3::x_axis(), 0.4f64.to_radians()).into_inner();

@@ -91,7 +91,7 @@ impl Default for RegistrationOptions {
             // residual the steps between renders minimise. With the model's, texture rounds
             // grow an error the frames share instead of shrinking it (demo phantom, every pose
             // turned 0.4 deg in pitch, texture rounds alone: 0.52 deg after three, 0.86 after
-            // six; with the frame's 0.21 and 0.19), so where they end depends on when they
+            // six; with the frame's 0.19 and 0.24), so where they end depends on when they
             // stop. From 1.5 mm / 2 deg drift new views went 29.71 -> 30.64 dB (BENCHMARKS.md).
             grad_blend: 0.0,
             // Against the geometry the model's: the frames divided by their colour's albedo
