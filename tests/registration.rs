@@ -23,6 +23,7 @@ use bronchosim::registration::{
 use bronchosim::shading::ShadingKind;
 use bronchosim::texture::synthesis::{SynthesisOptions, UnseenMode};
 use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
+use bronchosim::workflow::register::register_command;
 use std::path::Path;
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -323,6 +324,19 @@ fn build_keeps_exact_poses_when_refining_does_not_predict_held_out_frames_better
     for (w, g) in written.iter().zip(&case.poses) {
         assert_eq!(w.pose.camera_to_world, g.pose.camera_to_world);
     }
+
+    // `register` says the same, and writes what the rounds found beside it.
+    let reg_dir = tmp.path().join("reg");
+    let r = register_command(&case_dir, &reg_dir, &build_opts).unwrap();
+    assert_eq!(r.registration.kept, "given");
+    let written = read_poses(&reg_dir.join("poses.json"), &case_dir).unwrap();
+    let refined = read_poses(&reg_dir.join("refined_poses.json"), &case_dir).unwrap();
+    let mut moved = 0;
+    for ((w, r), g) in written.iter().zip(&refined).zip(&case.poses) {
+        assert_eq!(w.pose.camera_to_world, g.pose.camera_to_world);
+        moved += usize::from(r.pose.camera_to_world != g.pose.camera_to_world);
+    }
+    assert!(moved > 12, "the rounds moved {moved} of 24 poses");
 }
 
 #[test]
@@ -362,6 +376,21 @@ fn register_command_writes_poses_and_a_report_and_refuses_bad_input() {
         record["registration"]["frames"].as_array().unwrap().len(),
         12
     );
+    // What the round found is written whichever poses the held-out check keeps: it moved the
+    // tracker-like given poses.
+    let given = Case::open(&dir.join("case")).unwrap().poses;
+    let refined = read_poses(&dir.join("reg/refined_poses.json"), &dir.join("case")).unwrap();
+    assert_eq!(refined.len(), 12);
+    let moved = refined
+        .iter()
+        .zip(&given)
+        .filter(|(r, g)| pose_error(&r.pose.camera_to_world, &g.pose.camera_to_world).0 > 0.05)
+        .count();
+    println!(
+        "{moved} of 12 poses moved by the round; kept {}",
+        record["registration"]["kept"]
+    );
+    assert!(moved > 6, "{moved} of 12 poses moved by the round");
     let html = std::fs::read_to_string(dir.join("reg/report.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("camera centre moved (mm)"));
 

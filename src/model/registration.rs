@@ -62,7 +62,11 @@ pub struct PoseRegistration {
     /// The poses as given (camera → world, every frame of the case).
     #[serde(skip)]
     pub given: Vec<Affine>,
-    /// The refined pose of every frame of the case, with its image or video index.
+    /// The pose of every frame of the case as the model is built with it (the refined one, or
+    /// the given one when `kept` says so), with its image or video index.
+    #[serde(skip)]
+    pub poses: Vec<PoseEntry>,
+    /// What the rounds refined every frame's pose to, kept or not.
     #[serde(skip)]
     pub refined: Vec<PoseEntry>,
 }

@@ -1,14 +1,16 @@
 //! `bronchosim register CASE --out DIR`: the registration stage of the build on its own (the
 //! paper's Fig. 1 "2D/3D registration"): every frame's pose refined against the CT, written as
 //! DIR/poses.json (images relative to the case folder, so it can replace the case's own, with
-//! each frame's correction and status), DIR/registration.json and DIR/report.html.
+//! each frame's correction and status: the refined poses, or the given ones when they predict
+//! held-out frames better), DIR/refined_poses.json (what the rounds found, kept or not),
+//! DIR/registration.json and DIR/report.html.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::io::atomic::{write_bytes_atomic, write_json_atomic};
 use crate::io::output_dir::OutputDir;
-use crate::io::poses::write_poses_annotated;
+use crate::io::poses::{write_poses, write_poses_annotated};
 use crate::model::manifest::BuildTimings;
 use crate::model::registration::{PoseRegistration, TrackingSummary};
 use crate::workflow::build::PosesMode;
@@ -48,9 +50,14 @@ pub fn register_command(
         .ok_or_else(|| BuildError::Registration("--registration-rounds 0: nothing to do".into()))?;
     write_poses_annotated(
         &out_dir.join("poses.json"),
-        &registration.refined,
+        &registration.poses,
         &scene.case.dir,
         &pose_notes(&registration),
+    )?;
+    write_poses(
+        &out_dir.join("refined_poses.json"),
+        &registration.refined,
+        &scene.case.dir,
     )?;
     let record = serde_json::json!({
         "case": scene.case.dir.display().to_string(),

@@ -128,16 +128,19 @@ pub fn register_poses(
             }
         })
         .collect();
-    let refined: Vec<PoseEntry> = scene
-        .case
-        .poses
-        .iter()
-        .zip(&scene.poses)
-        .map(|(e, p)| PoseEntry {
-            frame: e.frame.clone(),
-            pose: Pose::new(*p),
-        })
-        .collect();
+    let entries = |poses: &[Affine]| -> Vec<PoseEntry> {
+        scene
+            .case
+            .poses
+            .iter()
+            .zip(poses)
+            .map(|(e, p)| PoseEntry {
+                frame: e.frame.clone(),
+                pose: Pose::new(*p),
+            })
+            .collect()
+    };
+    let (poses, refined) = (entries(&scene.poses), entries(&registered));
     let overlays = match &last_light {
         Some(light) => overlays(scene, &view, light, &given, &registered, &results)?,
         None => Vec::new(),
@@ -169,6 +172,7 @@ pub fn register_poses(
         tracking,
         overlays,
         given,
+        poses,
         refined,
     }))
 }

@@ -158,7 +158,7 @@ fn write_model_poses(out_dir: &OutputDir, built: &BuiltModel) -> Result<()> {
     let case = &built.scene.case;
     let tmp = out_dir.join("poses.json");
     match &built.registration {
-        Some(reg) => write_poses_annotated(&tmp, &reg.refined, &case.dir, &pose_notes(reg)),
+        Some(reg) => write_poses_annotated(&tmp, &reg.poses, &case.dir, &pose_notes(reg)),
         None => write_poses_annotated(&tmp, &case.poses, &case.dir, &[]),
     }
 }
