@@ -3,7 +3,8 @@
 //! a frame whose given pose is 10 mm off is flagged, and the first round against a model fused
 //! from the erroneous poses (geometry and colour-predicted albedo) reduces the error; `build
 //! --poses refine` registers a tracker's poses, leaves a wrong one out and records both, and
-//! repeats a geometry round that leaves many frames outliers (3 mm / 4 degree poses).
+//! repeats a geometry round that leaves many frames outliers (3 mm / 4 degree poses); texture
+//! rounds shrink an error every frame shares (their Jacobian from the frame's gradient).
 
 use bronchosim::camera::pose::camera_centre;
 use bronchosim::camera::Pose;
