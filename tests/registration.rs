@@ -485,7 +485,7 @@ fn texture_rounds_shrink_an_error_every_frame_shares() {
         };
         let mut poses = pitched.clone();
         let mut pitch = Vec::new();
-        for r in 0..3 {
+        for r in 0..2 {
             let fused_here;
             let model = match r {
                 0 => &first,
@@ -507,7 +507,9 @@ fn texture_rounds_shrink_an_error_every_frame_shares() {
     println!(
         "shared pitch {start:.3} deg, after each round: {frame_gradient:.3?} deg (frame's gradient), {model_gradient:.3?} deg (model's)"
     );
-    let (f, m) = (frame_gradient[2], model_gradient[2]);
+    // Measured: 0.400 -> 0.307, 0.246 deg with the frame's gradient, 0.329, 0.284 deg with the
+    // model's (a third round: 0.207 against 0.256 deg).
+    let (f, m) = (frame_gradient[1], model_gradient[1]);
     assert!(f < 0.8 * start, "{f} deg");
     assert!(f < m, "{f} vs {m} deg");
 }
