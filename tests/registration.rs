@@ -6,16 +6,15 @@
 //! repeats a geometry round that leaves many frames outliers (3 mm / 4 degree poses); texture
 //! rounds shrink an error every frame shares (their Jacobian from the frame's gradient).
 
-use bronchosim::camera::pose::camera_centre;
 use bronchosim::camera::Pose;
 use bronchosim::image::Frame;
 use bronchosim::io::case::Case;
 use bronchosim::io::poses::{read_poses, write_poses, FrameRef, PoseEntry};
-use bronchosim::math::{Affine, Rotation3, Vector3};
+use bronchosim::math::{Affine, Vector3};
 use bronchosim::model::{Model, ModelManifest};
 use bronchosim::phantom::pose_noise::PoseNoise;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
-use bronchosim::registration::pose::{pose_from, rotation_log, rotation_of};
+use bronchosim::registration::pose::{perturb, pose_error_axes};
 use bronchosim::registration::prior::MeasurementNoise;
 use bronchosim::registration::{
     apply_delta, pose_error, register_round, FrameStatus, PoseDelta, RegistrationOptions,
@@ -446,10 +445,7 @@ fn mean_pitch_deg(poses: &[Affine], truth: &[Affine]) -> f64 {
     let sum: f64 = poses
         .iter()
         .zip(truth)
-        .map(|(p, t)| {
-            let r = rotation_of(t).transpose() * rotation_of(p);
-            rotation_log(&r).x.to_degrees()
-        })
+        .map(|(p, t)| pose_error_axes(p, t).1[0])
         .sum();
     sum / poses.len() as f64
 }
@@ -465,11 +461,8 @@ fn texture_rounds_shrink_an_error_every_frame_shares() {
     let truth = true_poses(&case_dir);
     let frames: Vec<Frame> = case.frame_source().unwrap().map(|f| f.unwrap()).collect();
     let entries = case.poses.clone();
-    let turn = Rotation3::from_axis_angle(&Vector3::x_axis(), 0.4f64.to_radians()).into_inner();
-    let pitched: Vec<Affine> = truth
-        .iter()
-        .map(|t| pose_from(&(rotation_of(t) * turn), &camera_centre(t).coords))
-        .collect();
+    let turn = [0.0, 0.0, 0.0, 0.4f64.to_radians(), 0.0, 0.0];
+    let pitched: Vec<Affine> = truth.iter().map(|t| perturb(t, &turn)).collect();
     let start = mean_pitch_deg(&pitched, &truth);
     case_with_poses(&case_dir, &dir.join("pitched"), &entries, &pitched);
     let first = build(&dir.join("pitched"), &dir.join("pitched_model"));
