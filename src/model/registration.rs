@@ -31,6 +31,10 @@ pub struct RoundSummary {
     pub median_step_deg: f64,
     /// Frames per status at the end of the round.
     pub counts: std::collections::BTreeMap<String, usize>,
+    /// Frames moved as part of a run registered one airway ring away from its neighbours
+    /// (`registration::blocks`).
+    #[serde(default)]
+    pub realigned: usize,
     /// Wall time of the round (s): light, texture and registration.
     pub seconds: f64,
 }

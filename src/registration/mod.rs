@@ -9,6 +9,7 @@
 //! ```
 
 pub mod align;
+pub mod blocks;
 pub mod chroma;
 pub mod frame;
 pub mod level;

@@ -6,6 +6,7 @@
 //! neighbours' by more than a tracker could (e.g. a given pose off by 10 mm) is flagged an
 //! outlier. Nothing is kept silently: every frame ends with a status, and they are counted.
 
+use super::blocks::{realign_blocks, BlockOptions};
 use super::frame::{FrameObs, FrameRegistrar, FrameRegistration, FrameStatus};
 use super::pose::{apply_delta, delta_between, rotation_log, rotation_of, PoseDelta};
 use super::prior::{smooth_corrections, DriftPrior};
@@ -39,6 +40,11 @@ pub struct VideoOptions {
     pub frame_numbers: Vec<usize>,
     /// Ticked once per frame refined (restarts lengthen it).
     pub progress: Option<indicatif::ProgressBar>,
+    /// Runs of frames whose corrections jump where they meet the neighbouring runs are
+    /// registered again from their neighbours' corrections (see [`super::blocks`]). `None`
+    /// (the default): never; a video registered straight from a tracker's poses has no run to
+    /// trust yet.
+    pub blocks: Option<BlockOptions>,
 }
 
 impl Default for VideoOptions {
@@ -51,6 +57,7 @@ impl Default for VideoOptions {
             smooth: Some(DriftPrior::default()),
             frame_numbers: Vec::new(),
             progress: None,
+            blocks: None,
         }
     }
 }
@@ -66,6 +73,9 @@ pub struct VideoRegistration {
     pub counts: BTreeMap<String, usize>,
     /// Frames that needed a restart from their neighbours.
     pub restarted: usize,
+    /// Frames registered again as part of a run whose corrections jumped at its ends, and
+    /// moved to join their neighbours (see [`super::blocks`]).
+    pub realigned: usize,
     /// Each frame's own refined pose, before the smoothing.
     pub measured: Vec<Affine>,
     /// Registration noise the smoother estimated per camera axis (x, y, z mm; rotations about
@@ -259,6 +269,30 @@ pub fn refine_video(
             }
         }
     }
+    let mut realigned = 0;
+    if let Some(block_opts) = &opts.blocks {
+        let g = gate(&res);
+        let ok: Vec<bool> = res.iter().map(|r| good(r, g)).collect();
+        let register = |jobs: &[(usize, Affine)]| -> Result<Vec<FrameRegistration>> {
+            if let Some(p) = &opts.progress {
+                p.inc_length(jobs.len() as u64);
+            }
+            jobs.par_iter().map(|(f, s)| run(*f, s)).collect()
+        };
+        let replaced = realign_blocks(
+            &mut res,
+            poses,
+            &ok,
+            &opts.frame_numbers,
+            block_opts,
+            register,
+            |r| good(r, g),
+        )?;
+        realigned = replaced.len();
+        for f in replaced {
+            restarted[f] = true;
+        }
+    }
     // Flags: frames that never converged, and frames whose correction departs from their
     // neighbours'.
     let g = gate(&res);
@@ -276,6 +310,7 @@ pub fn refine_video(
     }
     Ok(VideoRegistration {
         restarted: restarted.iter().filter(|&&r| r).count(),
+        realigned,
         frames: res,
         passes,
         counts,

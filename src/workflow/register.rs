@@ -98,17 +98,18 @@ pub fn registration_report(reg: &PoseRegistration, case_dir: &Path) -> String {
         html.push_str("<h2>Before and after: frames on the model</h2>");
         html.push_str(&overlays_html(&reg.overlays));
     }
-    html.push_str("<h2>Rounds</h2><table><tr><th>round</th><th>against</th><th>median step (mm)</th><th>median step (deg)</th><th>statuses</th><th>s</th></tr>");
+    html.push_str("<h2>Rounds</h2><table><tr><th>round</th><th>against</th><th>median step (mm)</th><th>median step (deg)</th><th>statuses</th><th>frames realigned</th><th>s</th></tr>");
     for (i, r) in reg.rounds.iter().enumerate() {
         let counts: Vec<String> = r.counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
         let _ = write!(
             html,
-            "<tr><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{:.1}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{:.1}</td></tr>",
             i + 1,
             r.against,
             r.median_step_mm,
             r.median_step_deg,
             counts.join(", "),
+            r.realigned,
             r.seconds
         );
     }

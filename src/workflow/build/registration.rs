@@ -31,8 +31,8 @@ use crate::io::poses::PoseEntry;
 use crate::math::Affine;
 use crate::model::registration::{FramePoseResult, PoseOverlay, PoseRegistration, RoundSummary};
 use crate::registration::{
-    delta_between, register_round, FrameRegistration, FrameStatus, ModelParts, RoundKind,
-    RoundOptions, TrackState, VideoOptions,
+    blocks::BlockOptions, delta_between, register_round, FrameRegistration, FrameStatus,
+    ModelParts, RoundKind, RoundOptions, TrackState, VideoOptions,
 };
 use crate::render::{MipOptions, MipTexture};
 use crate::shading::calibrated::{CalibratedModel, CalibratedOptions, SpecularMode};
@@ -254,7 +254,7 @@ fn run_rounds(
         if r == 0 {
             given_score = held_out_psnr(scene, &light, opts)?;
         }
-        let (summary, frames_done) = run_round(scene, view, kind, &light, opts)?;
+        let (summary, frames_done) = run_round(scene, view, kind, &light, opts, r)?;
         *last_light = Some(light);
         let settled = kind == RoundKind::Texture
             && summary.median_step_mm < opts.registration_tolerance_mm
@@ -297,6 +297,7 @@ fn run_round(
     kind: RoundKind,
     light: &CalibratedModel,
     opts: &BuildOptions,
+    round_index: usize,
 ) -> Result<(RoundSummary, Vec<FrameRegistration>)> {
     let started = Instant::now();
     // A geometry round still needs the texture: the colour–albedo relation it divides
@@ -326,6 +327,11 @@ fn run_round(
             video: VideoOptions {
                 frame_numbers: scene.frame_numbers.clone(),
                 progress: progress.bar(),
+                // Not in the first round: from the tracker's poses a third of the frames or more
+                // end as outliers and the runs are fragments with none to trust (demo phantom,
+                // 3 mm / 4 deg: realigning from the first round 25.87 dB new views, from the
+                // second 29.43 dB, never 26.85 dB; BENCHMARKS.md).
+                blocks: (round_index > 0).then(BlockOptions::default),
                 ..VideoOptions::default()
             },
             ..RoundOptions::default()
@@ -357,6 +363,7 @@ fn run_round(
         median_step_mm: step_mm,
         median_step_deg: step_deg,
         counts: video.counts.clone(),
+        realigned: video.realigned,
         seconds: started.elapsed().as_secs_f64(),
     };
     scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
