@@ -48,8 +48,8 @@ pub struct PoseRegistration {
     pub rounds: Vec<RoundSummary>,
     /// Frames left out of the model.
     pub left_out: usize,
-    /// The poses the model was built with: `refined`, or `given` when the given poses predict
-    /// held-out frames better than the refined ones.
+    /// The poses the model was built with: `refined`, or `given` unless the refined poses
+    /// predict held-out frames more than `registration_keep_margin_db` (1 dB) better.
     pub kept: String,
     /// The calibrated light's mean PSNR on held-out frames with the given poses (dB; `None`
     /// without cross-validation).

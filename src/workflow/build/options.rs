@@ -89,6 +89,15 @@ pub struct BuildOptions {
     /// of its frames are outliers, their corrections departing from their neighbours': the
     /// texture fused after it would follow their errors (1 or more: never).
     pub registration_geometry_repeat_share: f64,
+    /// The refined poses are kept only when they predict held-out frames better than the given
+    /// ones by more than this (dB). Each held-out frame's refined pose was registered against
+    /// a texture it helped fuse, and a model fused at poses the registration made consistent
+    /// predicts its own frames well even where those poses are off: from the exact poses of a
+    /// real airway (ATM_224) the rounds moved them 0.26 mm / 0.58 deg and won the check by
+    /// 0.36 dB while new views lost 3.8 dB. Poses 0.5 mm / 0.6 deg off lose the check by 4.1
+    /// (ATM_224) and 6.0 dB (demo phantom), exact ones on the demo phantom win it by 0.6 dB
+    /// (BENCHMARKS.md).
+    pub registration_keep_margin_db: f64,
     /// Gain corrections of the light fitted in each registration round (the light's shape is
     /// not refitted there: the rounds only need a light to register against).
     pub registration_light_refinements: usize,
@@ -180,6 +189,7 @@ impl Default for BuildOptions {
             // leaves 37 of 80 frames outliers, a second one 8; from 1.5 mm / 2 deg 10, and a
             // second round there was no better (BENCHMARKS.md, issue 16, session 12).
             registration_geometry_repeat_share: 0.25,
+            registration_keep_margin_db: 1.0,
             registration_tolerance_mm: 0.05,
             registration_light_refinements: 0,
             tracking: Default::default(),

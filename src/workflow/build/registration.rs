@@ -86,8 +86,9 @@ pub fn register_poses(
         &mut statuses,
         &mut last_light,
     )?;
-    // Keep the refined poses only when they predict held-out frames better than the given
-    // ones (the same test, with the same held-out frames, as the shading model's choice).
+    // Keep the refined poses only when they predict held-out frames clearly better than the
+    // given ones (the same test, with the same held-out frames, as the shading model's
+    // choice; `registration_keep_margin_db` says why clearly).
     let refined_score = match given_score {
         Some(_) => {
             // Refitted at the final poses, as the given poses' light was at theirs: the last
@@ -98,15 +99,16 @@ pub fn register_poses(
         }
         None => None,
     };
-    let kept_given = matches!((given_score, refined_score), (Some(g), Some(r)) if g >= r);
+    let margin = opts.registration_keep_margin_db;
+    let kept_given = matches!((given_score, refined_score), (Some(g), Some(r)) if r <= g + margin);
     let registered = scene.poses.clone();
     if kept_given {
         scene.poses = given.clone();
         scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
         warnings.push(format!(
-            "registration: the given poses predict held-out frames better than the refined ones ({:.2} vs {:.2} dB); the model is built with the given poses",
-            given_score.unwrap_or(f64::NAN),
-            refined_score.unwrap_or(f64::NAN)
+            "registration: the refined poses do not predict held-out frames more than {margin} dB better than the given ones (refined {:.2} dB, given {:.2} dB); the model is built with the given poses",
+            refined_score.unwrap_or(f64::NAN),
+            given_score.unwrap_or(f64::NAN)
         ));
     }
     if kept_given && first {
