@@ -127,15 +127,15 @@ where
         return Ok(Vec::new());
     };
     let mut replaced = Vec::new();
-    // Outward from the anchor: to the start of the video, each run's last frame meets the
-    // reference; to its end, each run's first frame does.
-    let left = (0..anchor).rev().map(|i| (i, runs[anchor][0], true));
-    let right = (anchor + 1..runs.len()).map(|i| (i, runs[anchor][runs[anchor].len() - 1], false));
-    for side in [left.collect::<Vec<_>>(), right.collect()] {
-        let Some(&(_, mut reference, _)) = side.first() else {
-            continue;
-        };
-        for (i, _, towards_start) in side {
+    // Outward from the anchor: towards the start of the video each run's last frame meets the
+    // reference (the settled run's first), towards the end its first frame does.
+    let (anchor_first, anchor_last) = (runs[anchor][0], runs[anchor][runs[anchor].len() - 1]);
+    let sides = [
+        ((0..anchor).rev().collect::<Vec<_>>(), anchor_first, true),
+        ((anchor + 1..runs.len()).collect(), anchor_last, false),
+    ];
+    for (side, mut reference, towards_start) in sides {
+        for i in side {
             let run = &runs[i];
             if run.len() < opts.min_frames {
                 continue;
