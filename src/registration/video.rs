@@ -222,6 +222,13 @@ pub fn refine_video(
             .collect();
         median(costs).map_or(0.0, |m| m * opts.cost_ratio)
     };
+    // Frames registered again from other starts (restarts, realigned runs), in parallel.
+    let run_jobs = |jobs: &[(usize, Affine)]| -> Result<Vec<FrameRegistration>> {
+        if let Some(p) = &opts.progress {
+            p.inc_length(jobs.len() as u64);
+        }
+        jobs.par_iter().map(|(f, s)| run(*f, s)).collect()
+    };
     let mut tried: Vec<Vec<Affine>> = vec![Vec::new(); n];
     let mut restarted = vec![false; n];
     let mut passes = 0;
@@ -253,14 +260,8 @@ pub fn refine_video(
             break;
         }
         passes += 1;
-        if let Some(p) = &opts.progress {
-            p.inc_length(jobs.len() as u64);
-        }
-        let out: Vec<(usize, FrameRegistration)> = jobs
-            .par_iter()
-            .map(|(f, s)| run(*f, s).map(|r| (*f, r)))
-            .collect::<Result<_>>()?;
-        for (f, r) in out {
+        let out = run_jobs(&jobs)?;
+        for ((f, _), r) in jobs.into_iter().zip(out) {
             let better = good(&r, g) && (!good(&res[f], g) || r.cost_after < res[f].cost_after)
                 || (!good(&res[f], g) && r.cost_after < res[f].cost_after);
             if better {
@@ -273,19 +274,13 @@ pub fn refine_video(
     if let Some(block_opts) = &opts.blocks {
         let g = gate(&res);
         let ok: Vec<bool> = res.iter().map(|r| good(r, g)).collect();
-        let register = |jobs: &[(usize, Affine)]| -> Result<Vec<FrameRegistration>> {
-            if let Some(p) = &opts.progress {
-                p.inc_length(jobs.len() as u64);
-            }
-            jobs.par_iter().map(|(f, s)| run(*f, s)).collect()
-        };
         let replaced = realign_blocks(
             &mut res,
             poses,
             &ok,
             &opts.frame_numbers,
             block_opts,
-            register,
+            run_jobs,
             |r| good(r, g),
         )?;
         realigned = replaced.len();
