@@ -125,13 +125,15 @@ fn register_with(
     register_round(parts, frames, &parts.light.gains, None, poses, kind, opts).unwrap()
 }
 
-/// `build` with two registration rounds and no cross-validation (the refined poses are kept).
-fn build_refined(case: &Path, out: &Path) -> ModelManifest {
+/// `build` with two registration rounds and no cross-validation (the refined poses are kept),
+/// scored against `truth` when given.
+fn build_refined(case: &Path, out: &Path, truth: Option<&Path>) -> ModelManifest {
     let opts = BuildOptions {
         cross_validate_every: 0,
         shading: Some(ShadingKind::Calibrated),
         poses: PosesMode::Refine,
         registration_rounds: 2,
+        truth: truth.map(Path::to_path_buf),
         quiet: true,
         ..Default::default()
     };
@@ -260,7 +262,7 @@ fn build_refines_tracker_poses_and_leaves_a_wrong_one_out() {
     let (mm0, deg0, _) = errors(&given, &truth);
 
     let out = dir.join("model");
-    let m = build_refined(&noisy, &out);
+    let m = build_refined(&noisy, &out, Some(&case_dir.join("truth")));
     let reg = m
         .registration
         .as_ref()
@@ -289,6 +291,27 @@ fn build_refines_tracker_poses_and_leaves_a_wrong_one_out() {
     assert!(mm < 0.5 * mm0, "{mm} mm");
     let text = std::fs::read_to_string(out.join("poses.json")).unwrap();
     assert_eq!(text.matches("\"status\"").count(), 24);
+
+    // With the truth's poses, model.json scores the given and the refined poses against them
+    // (the same frames' errors as computed here: the median of 24 lies between the 12th and
+    // 13th error).
+    let pt = m.pose_truth.as_ref().expect("model.json pose_truth");
+    let (given_acc, used_acc) = (&pt.given, &pt.used);
+    assert_eq!((given_acc.frames, used_acc.frames), (24, 24));
+    let mut e: Vec<f64> = given
+        .iter()
+        .zip(&truth)
+        .map(|(g, t)| pose_error(g, t).0)
+        .collect();
+    e.sort_by(f64::total_cmp);
+    assert!(
+        (given_acc.median_mm - 0.5 * (e[11] + e[12])).abs() < 1e-9,
+        "{given_acc:?}"
+    );
+    assert!(used_acc.median_mm < 0.5 * given_acc.median_mm, "{pt:?}");
+    assert!(pt.refined.is_some());
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("Poses against the truth"));
 }
 
 #[test]
@@ -363,7 +386,16 @@ fn register_command_writes_poses_and_a_report_and_refuses_bad_input() {
             .output()
             .unwrap()
     };
-    let out = run(&["register", "case", "--out", "reg", "--rounds", "1"]);
+    let out = run(&[
+        "register",
+        "case",
+        "--out",
+        "reg",
+        "--rounds",
+        "1",
+        "--truth",
+        "case/truth",
+    ]);
     assert!(
         out.status.success(),
         "{}",
@@ -395,6 +427,15 @@ fn register_command_writes_poses_and_a_report_and_refuses_bad_input() {
         record["registration"]["kept"]
     );
     assert!(moved > 6, "{moved} of 12 poses moved by the round");
+    // Scored against the truth's poses: the given ones are about 1 mm off, the refined ones
+    // closer.
+    let truth_record = &record["pose_truth"];
+    let given_mm = truth_record["given"]["median_mm"].as_f64().unwrap();
+    let refined_mm = truth_record["refined"]["median_mm"].as_f64().unwrap();
+    println!("against the truth: given {given_mm:.3} mm, refined {refined_mm:.3} mm");
+    assert_eq!(truth_record["given"]["frames"], 12);
+    assert!(given_mm > 0.5 && refined_mm < given_mm, "{truth_record}");
+    assert!(text.contains("poses against the truth"), "{text}");
     let html = std::fs::read_to_string(dir.join("reg/report.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("camera centre moved (mm)"));
 
@@ -420,7 +461,7 @@ fn build_repeats_a_geometry_round_that_leaves_many_outliers() {
     let given: Vec<Affine> = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
     let (mm0, deg0, _) = errors(&given, &truth);
     let out = dir.join("model");
-    let m = build_refined(&case_dir, &out);
+    let m = build_refined(&case_dir, &out, None);
     let reg = m.registration.expect("model.json records the registration");
     let refined: Vec<Affine> = read_poses(&out.join("poses.json"), &case_dir)
         .unwrap()

@@ -1,7 +1,7 @@
 //! The model folder's manifest (model.json) and shading file (shading.json): the plain data
 //! `build` writes and `render`, `flythrough` and `evaluate` read back.
 
-use crate::model::registration::PoseRegistration;
+use crate::model::registration::{PoseRegistration, PoseTruth};
 use crate::model::selection::FrameSelection;
 use serde::{Deserialize, Serialize};
 
@@ -106,6 +106,9 @@ pub struct ModelManifest {
     /// How the poses were registered to the CT (`None`: trusted as given, `--poses fixed`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub registration: Option<PoseRegistration>,
+    /// The poses against the true poses of `build --truth` (absent without them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_truth: Option<PoseTruth>,
     /// Which frames were used and why the others were not (absent when every frame was used
     /// without a selection, `--max-frames 0`).
     #[serde(default, skip_serializing_if = "Option::is_none")]

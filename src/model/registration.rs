@@ -3,6 +3,7 @@
 
 use crate::io::poses::PoseEntry;
 use crate::math::Affine;
+use crate::registration::accuracy::PoseAccuracy;
 use serde::{Deserialize, Serialize};
 
 /// One frame's registration, as model.json and poses.json record it.
@@ -115,4 +116,18 @@ pub struct PoseOverlay {
     pub mismatch_given: f64,
     /// The same at the registered pose.
     pub mismatch_registered: f64,
+}
+
+/// The poses against the case's true poses (model.json `pose_truth`, registration.json
+/// `pose_truth`), when the truth folder given to `build --truth` / `register --truth` holds a
+/// poses.json naming the case's frames.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PoseTruth {
+    /// The poses as given (tracked, with `--poses first`).
+    pub given: PoseAccuracy,
+    /// What the registration refined them to, kept or not (absent with `--poses fixed`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub refined: Option<PoseAccuracy>,
+    /// The poses the model was built with.
+    pub used: PoseAccuracy,
 }

@@ -8,6 +8,7 @@
 //! ModelParts + first pose ─ Tracker ─ track(frames) (no tracker: `--poses first`)
 //! ```
 
+pub mod accuracy;
 pub mod align;
 pub mod blocks;
 pub mod chroma;

@@ -12,9 +12,11 @@ use crate::io::atomic::{write_bytes_atomic, write_json_atomic};
 use crate::io::output_dir::OutputDir;
 use crate::io::poses::{write_poses, write_poses_annotated};
 use crate::model::manifest::BuildTimings;
-use crate::model::registration::{PoseRegistration, TrackingSummary};
+use crate::model::registration::{PoseRegistration, PoseTruth, TrackingSummary};
 use crate::workflow::build::PosesMode;
-use crate::workflow::build::{pose_notes, register_poses, BuildError, BuildOptions, BuildScene};
+use crate::workflow::build::{
+    pose_notes, poses_against_truth, register_poses, BuildError, BuildOptions, BuildScene,
+};
 use crate::workflow::registration_overlays::overlays_html;
 use crate::Result;
 
@@ -22,6 +24,8 @@ use crate::Result;
 pub struct RegisterSummary {
     /// The registration.
     pub registration: PoseRegistration,
+    /// The poses against the truth's (with `--truth` holding a poses.json).
+    pub pose_truth: Option<PoseTruth>,
     /// Warnings (frames left out, a light that could not be fitted as asked).
     pub warnings: Vec<String>,
     /// Wall time (s).
@@ -48,6 +52,16 @@ pub fn register_command(
     let mut warnings = Vec::new();
     let registration = register_poses(&mut scene, opts, &mut warnings)?
         .ok_or_else(|| BuildError::Registration("--registration-rounds 0: nothing to do".into()))?;
+    let pose_truth = match &opts.truth {
+        Some(truth) => poses_against_truth(
+            Some(&registration),
+            &scene.case.poses,
+            truth,
+            &scene.case.dir,
+            &mut warnings,
+        )?,
+        None => None,
+    };
     write_poses_annotated(
         &out_dir.join("poses.json"),
         &registration.poses,
@@ -62,25 +76,31 @@ pub fn register_command(
     let record = serde_json::json!({
         "case": scene.case.dir.display().to_string(),
         "registration": &registration,
+        "pose_truth": &pose_truth,
         "warnings": &warnings,
         "seconds": started.elapsed().as_secs_f64(),
     });
     write_json_atomic(&out_dir.join("registration.json"), &record)?;
     write_bytes_atomic(
         &out_dir.join("report.html"),
-        registration_report(&registration, &scene.case.dir).as_bytes(),
+        registration_report(&registration, pose_truth.as_ref(), &scene.case.dir).as_bytes(),
     )?;
     out_dir.commit()?;
     Ok(RegisterSummary {
         registration,
+        pose_truth,
         warnings,
         seconds: started.elapsed().as_secs_f64(),
     })
 }
 
-/// A self-contained HTML page: the corrections over the video (mm and degrees), the rounds and
-/// every flagged frame.
-pub fn registration_report(reg: &PoseRegistration, case_dir: &Path) -> String {
+/// A self-contained HTML page: the corrections over the video (mm and degrees), the poses
+/// against the truth when known, the rounds and every flagged frame.
+pub fn registration_report(
+    reg: &PoseRegistration,
+    truth: Option<&PoseTruth>,
+    case_dir: &Path,
+) -> String {
     let mut html = format!(
         "<!doctype html><meta charset=utf-8><title>bronchosim registration</title>\
          <style>body{{font-family:sans-serif;max-width:60em;margin:2em auto}}td,th{{padding:0 .6em}}</style>\
@@ -94,6 +114,9 @@ pub fn registration_report(reg: &PoseRegistration, case_dir: &Path) -> String {
     }
     html.push_str("<h2>Correction of every frame's pose</h2>");
     html.push_str(&correction_plots(reg));
+    if let Some(t) = truth {
+        html.push_str(&pose_truth_html(t));
+    }
     if !reg.overlays.is_empty() {
         html.push_str("<h2>Before and after: frames on the model</h2>");
         html.push_str(&overlays_html(&reg.overlays));
@@ -138,6 +161,41 @@ pub fn registration_report(reg: &PoseRegistration, case_dir: &Path) -> String {
         html.push_str(&flagged.concat());
         html.push_str("</table>");
     }
+    html
+}
+
+/// A table of the poses against the truth: median, frames within 1 mm and 1 degree, and the
+/// mean and RMS error along each of the true camera's axes.
+pub(crate) fn pose_truth_html(t: &PoseTruth) -> String {
+    let mut html = String::from(
+        "<h2>Poses against the truth</h2><p>Errors along the true camera's axes (x right, y down, \
+         z along the view; pitch, yaw and roll about them). A mean close to the RMS is an error \
+         the frames share: held-out frames cannot show it, new views pay for it.</p>\
+         <table><tr><th>poses</th><th>frames</th><th>median (mm / deg)</th><th>within 1 mm and 1 deg</th>\
+         <th>mean x / y / z (mm)</th><th>RMS x / y / z (mm)</th><th>mean pitch / yaw / roll (deg)</th>\
+         <th>RMS pitch / yaw / roll (deg)</th></tr>",
+    );
+    let three = |v: &[f64; 3], d: usize| format!("{:.d$} / {:.d$} / {:.d$}", v[0], v[1], v[2]);
+    let rows = [
+        Some(("given", &t.given)),
+        t.refined.as_ref().map(|r| ("refined", r)),
+        Some(("used by the model", &t.used)),
+    ];
+    for (name, a) in rows.into_iter().flatten() {
+        let _ = write!(
+            html,
+            "<tr><td>{name}</td><td>{}</td><td>{:.3} / {:.3}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            a.frames,
+            a.median_mm,
+            a.median_deg,
+            a.within_1mm_1deg,
+            three(&a.mean_mm, 3),
+            three(&a.rms_mm, 3),
+            three(&a.mean_deg, 2),
+            three(&a.rms_deg, 2)
+        );
+    }
+    html.push_str("</table>");
     html
 }
 

@@ -14,7 +14,7 @@ use crate::shading::paper::plots::{plot_psi_slices, plot_samples_density};
 use crate::shading::paper::PsiModel;
 use crate::shading::{FittedShading, FrameShading, SampleSet};
 use crate::workflow::new_views_figure::NewViewsFigure;
-use crate::workflow::register::{correction_plots, tracking_html};
+use crate::workflow::register::{correction_plots, pose_truth_html, tracking_html};
 use crate::workflow::registration_overlays::overlays_html;
 use crate::{Error, Result};
 use base64::Engine;
@@ -421,6 +421,9 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
     }
     if let Some(reg) = &m.registration {
         registration_section(&mut html, reg);
+    }
+    if let Some(t) = &m.pose_truth {
+        html.push_str(&pose_truth_html(t));
     }
     if let Some(fig) = inputs.new_views {
         new_views_section(&mut html, fig, tmp.path())?;

@@ -1,7 +1,8 @@
 //! What each command prints when it is done: one formatter per command's result, so the
 //! command line only parses, calls and prints.
 
-use crate::model::registration::PoseRegistration;
+use crate::model::registration::{PoseRegistration, PoseTruth};
+use crate::registration::accuracy::PoseAccuracy;
 use crate::workflow::register::RegisterSummary;
 use std::path::Path;
 
@@ -70,6 +71,9 @@ pub fn build_text(out: &Path, m: &ModelManifest) -> String {
     if let Some(reg) = &m.registration {
         text.push_str(&registration_line(reg));
     }
+    if let Some(t) = &m.pose_truth {
+        text.push_str(&pose_truth_line(t));
+    }
     if let Some(cv) = &m.cross_validation {
         for mc in &cv.models {
             text.push_str(&format!(
@@ -115,10 +119,26 @@ fn registration_line(reg: &PoseRegistration) -> String {
     )
 }
 
+/// One line on the poses against the truth: given and used, median and frames within.
+fn pose_truth_line(t: &PoseTruth) -> String {
+    let one = |a: &PoseAccuracy| {
+        format!(
+            "{:.3} mm / {:.3} deg median, {} of {} within 1 mm and 1 deg",
+            a.median_mm, a.median_deg, a.within_1mm_1deg, a.frames
+        )
+    };
+    format!(
+        "  poses against the truth: given {}; used {}\n",
+        one(&t.given),
+        one(&t.used)
+    )
+}
+
 /// What `register` wrote into `out`.
 pub fn register_text(out: &Path, s: &RegisterSummary) -> String {
+    let truth = s.pose_truth.as_ref().map_or(String::new(), pose_truth_line);
     format!(
-        "registered {} in {:.1} s\n{}",
+        "registered {} in {:.1} s\n{}{truth}",
         out.display(),
         s.seconds,
         registration_line(&s.registration)

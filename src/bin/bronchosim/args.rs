@@ -233,7 +233,8 @@ pub struct BuildArgs {
     #[arg(long, default_value_t = build_defaults().cross_validate_every)]
     pub cross_validate_every: usize,
     /// Reference views (views.json, camera.json, images; e.g. the phantom's truth/): the
-    /// report then scores new views against them next to two baselines.
+    /// report then scores new views against them next to two baselines, and the poses against
+    /// the true ones when the folder has a poses.json (model.json `pose_truth`).
     #[arg(long)]
     pub truth: Option<PathBuf>,
     /// `refine`: register every frame's pose to the CT before fitting (photometric, against
@@ -285,6 +286,10 @@ pub struct RegisterArgs {
     /// (0 rounds: tracking alone). `fixed` is refused: there would be nothing to do.
     #[arg(long, value_enum, default_value_t = PosesMode::Refine)]
     pub poses: PosesMode,
+    /// A truth folder with the frames' true poses (poses.json; e.g. the phantom's truth/):
+    /// registration.json and the report then score the given and refined poses against them.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
     /// Replace DIR if it exists.
     #[arg(long)]
     pub force: bool,

@@ -136,6 +136,7 @@ fn register(a: RegisterArgs, quiet: bool) -> anyhow::Result<String> {
         registration_rounds: a.rounds,
         registration_geometry_every: a.geometry_every,
         poses: a.poses,
+        truth: a.truth,
         ..Default::default()
     };
     let s = register_command(&a.case, &a.out, &opts)

@@ -25,6 +25,7 @@ mod gain_correction;
 mod light;
 mod light_refit;
 mod options;
+mod pose_truth;
 mod registration;
 mod scene;
 pub mod selection;
@@ -39,6 +40,7 @@ pub use gain_correction::refine_gains_against_texture;
 pub use light::CalibratedLight;
 pub use light_refit::{refit_light_with_albedo, sample_albedo, sample_uvs};
 pub use options::{BuildOptions, PosesMode};
+pub use pose_truth::poses_against_truth;
 pub use registration::{pose_notes, register_poses};
 pub use scene::BuildScene;
 pub use textures::{FusedAlbedo, Textures};
@@ -72,6 +74,16 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     let registration = timed(&mut timings.registration, || {
         registration::register_poses(&mut scene, opts, &mut warnings)
     })?;
+    let pose_truth = match &opts.truth {
+        Some(truth) => poses_against_truth(
+            registration.as_ref(),
+            &scene.case.poses,
+            truth,
+            &scene.case.dir,
+            &mut warnings,
+        )?,
+        None => None,
+    };
     let (pass, samples) = timed(&mut timings.fit, || fit_pass::fit_pass(&mut scene, opts))?;
     let light = timed(&mut timings.calibrated_fit, || {
         light::calibrated_light(&scene, samples, opts, &mut warnings)
@@ -93,6 +105,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         light_fit,
         selection,
         registration,
+        pose_truth,
         cross_validation,
         textures: &textures,
         timings,

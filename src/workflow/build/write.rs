@@ -17,7 +17,7 @@ use crate::model::manifest::{
     relative_path, BuildTimings, CrossValidation, ExtraTexture, LightFitSettings, ModelCounts,
     ModelInputs, ModelManifest, UnseenWalls, MODEL_FORMAT_VERSION, PAPER_TEXTURE_FILE,
 };
-use crate::model::registration::PoseRegistration;
+use crate::model::registration::{PoseRegistration, PoseTruth};
 use crate::model::selection::FrameSelection;
 use crate::model::Model;
 use crate::shading::FittedShading;
@@ -40,6 +40,8 @@ pub struct BuiltModel<'a> {
     pub selection: Option<FrameSelection>,
     /// How the poses were registered, when they were.
     pub registration: Option<PoseRegistration>,
+    /// The poses against the truth's, when `--truth` has a poses.json.
+    pub pose_truth: Option<PoseTruth>,
     /// The cross-validation of the shading models, when it ran.
     pub cross_validation: Option<CrossValidation>,
     /// The fused textures.
@@ -142,6 +144,7 @@ fn write_model_files(out_dir: &OutputDir, built: &BuiltModel) -> Result<ModelMan
         cross_validation: built.cross_validation.clone(),
         light_fit: built.light_fit.clone(),
         registration: built.registration.clone(),
+        pose_truth: built.pose_truth.clone(),
         frame_selection: built.selection.clone(),
         unseen_walls: Some(unseen_walls(built, atlas.texel_mm)),
         fusion_seams: Some(built.textures.albedo.seams),
