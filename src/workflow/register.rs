@@ -52,16 +52,12 @@ pub fn register_command(
     let mut warnings = Vec::new();
     let registration = register_poses(&mut scene, opts, &mut warnings)?
         .ok_or_else(|| BuildError::Registration("--registration-rounds 0: nothing to do".into()))?;
-    let pose_truth = match &opts.truth {
-        Some(truth) => poses_against_truth(
-            Some(&registration),
-            &scene.case.poses,
-            truth,
-            &scene.case.dir,
-            &mut warnings,
-        )?,
-        None => None,
-    };
+    let pose_truth = poses_against_truth(
+        Some(&registration),
+        &scene,
+        opts.truth.as_deref(),
+        &mut warnings,
+    )?;
     write_poses_annotated(
         &out_dir.join("poses.json"),
         &registration.poses,

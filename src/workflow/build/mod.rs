@@ -74,16 +74,12 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     let registration = timed(&mut timings.registration, || {
         registration::register_poses(&mut scene, opts, &mut warnings)
     })?;
-    let pose_truth = match &opts.truth {
-        Some(truth) => poses_against_truth(
-            registration.as_ref(),
-            &scene.case.poses,
-            truth,
-            &scene.case.dir,
-            &mut warnings,
-        )?,
-        None => None,
-    };
+    let pose_truth = poses_against_truth(
+        registration.as_ref(),
+        &scene,
+        opts.truth.as_deref(),
+        &mut warnings,
+    )?;
     let (pass, samples) = timed(&mut timings.fit, || fit_pass::fit_pass(&mut scene, opts))?;
     let light = timed(&mut timings.calibrated_fit, || {
         light::calibrated_light(&scene, samples, opts, &mut warnings)

@@ -2,6 +2,7 @@
 //! `build --truth` or `register --truth` has a poses.json (the phantom's `truth/` does), the
 //! given, refined and used poses of the frames it names are scored against it.
 
+use super::scene::BuildScene;
 use crate::io::poses::{read_poses, FrameRef, PoseEntry};
 use crate::math::Affine;
 use crate::model::registration::{PoseRegistration, PoseTruth};
@@ -9,16 +10,19 @@ use crate::registration::accuracy::PoseAccuracy;
 use crate::Result;
 use std::path::Path;
 
-/// The poses of `registration` (or, without one, the case's `given` entries) against
-/// `truth_dir/poses.json`, its images resolved in `case_dir`. `None` when the truth folder has
-/// no poses.json, or (with a warning) when it names none of the frames.
+/// The poses of `registration` (or, without one, the scene's case as given) against
+/// `truth_dir/poses.json`, its images resolved in the case folder. `None` without a truth
+/// folder, when it has no poses.json, or (with a warning) when it names none of the frames.
 pub fn poses_against_truth(
     registration: Option<&PoseRegistration>,
-    given: &[PoseEntry],
-    truth_dir: &Path,
-    case_dir: &Path,
+    scene: &BuildScene,
+    truth_dir: Option<&Path>,
     warnings: &mut Vec<String>,
 ) -> Result<Option<PoseTruth>> {
+    let Some(truth_dir) = truth_dir else {
+        return Ok(None);
+    };
+    let (given, case_dir) = (scene.case.poses.as_slice(), &scene.case.dir);
     let path = truth_dir.join("poses.json");
     if !path.exists() {
         return Ok(None);
