@@ -261,8 +261,16 @@ fn build_refines_tracker_poses_and_leaves_a_wrong_one_out() {
     case_with_poses(&case_dir, &noisy, &case.poses, &given);
     let (mm0, deg0, _) = errors(&given, &truth);
 
+    // A truth folder with the true poses alone (no reference views to render).
+    let truth_dir = dir.join("true_poses");
+    std::fs::create_dir(&truth_dir).unwrap();
+    std::fs::copy(
+        case_dir.join("truth/poses.json"),
+        truth_dir.join("poses.json"),
+    )
+    .unwrap();
     let out = dir.join("model");
-    let m = build_refined(&noisy, &out, Some(&case_dir.join("truth")));
+    let m = build_refined(&noisy, &out, Some(&truth_dir));
     let reg = m
         .registration
         .as_ref()

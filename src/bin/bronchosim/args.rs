@@ -234,7 +234,8 @@ pub struct BuildArgs {
     pub cross_validate_every: usize,
     /// Reference views (views.json, camera.json, images; e.g. the phantom's truth/): the
     /// report then scores new views against them next to two baselines, and the poses against
-    /// the true ones when the folder has a poses.json (model.json `pose_truth`).
+    /// the true ones when the folder has a poses.json (model.json `pose_truth`; a folder with
+    /// the true poses.json alone scores the poses only).
     #[arg(long)]
     pub truth: Option<PathBuf>,
     /// `refine`: register every frame's pose to the CT before fitting (photometric, against

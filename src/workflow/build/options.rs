@@ -107,7 +107,9 @@ pub struct BuildOptions {
     /// than 0.1 degree.
     pub registration_tolerance_mm: f64,
     /// Reference views (a folder with views.json, camera.json and the images, like the
-    /// phantom's truth/): the report then scores the new views against them (Fig. 4).
+    /// phantom's truth/): the report then scores the new views against them (Fig. 4), and the
+    /// poses against the true ones when it holds a poses.json (a folder with the true poses
+    /// alone scores the poses only).
     pub truth: Option<std::path::PathBuf>,
     /// Replace an existing model folder.
     pub force: bool,

@@ -176,7 +176,13 @@ fn write_model_report(
 ) -> Result<()> {
     let model = Model::load(out_dir.path())?;
     let case = &built.scene.case;
-    let figure = match &opts.truth {
+    // A truth folder with the true poses alone scores the poses (model.json `pose_truth`); the
+    // new views are then shown between training viewpoints, as without one.
+    let views = opts
+        .truth
+        .as_ref()
+        .filter(|t| t.join("views.json").exists() || !t.join("poses.json").exists());
+    let figure = match views {
         Some(truth) => {
             let fig = truth_figure(&model, case, truth)?;
             write_json_atomic(&out_dir.join("evaluation.json"), &fig.scores)?;
