@@ -17,8 +17,9 @@ use bronchosim::math::{Affine, Vector3};
 use bronchosim::model::{Model, ModelManifest};
 use bronchosim::phantom::pose_noise::PoseNoise;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
+use bronchosim::registration::accuracy::PoseAccuracy;
 use bronchosim::registration::blocks::BlockOptions;
-use bronchosim::registration::pose::{perturb, pose_error_axes};
+use bronchosim::registration::pose::perturb;
 use bronchosim::registration::prior::MeasurementNoise;
 use bronchosim::registration::{
     apply_delta, pose_error, register_round, FrameObs, FrameRegistrar, FrameStatus, PoseDelta,
@@ -495,12 +496,7 @@ fn build_repeats_a_geometry_round_that_leaves_many_outliers() {
 /// Mean rotation error about the camera's own x axis (pitch, degrees) of `poses` against
 /// `truth`.
 fn mean_pitch_deg(poses: &[Affine], truth: &[Affine]) -> f64 {
-    let sum: f64 = poses
-        .iter()
-        .zip(truth)
-        .map(|(p, t)| pose_error_axes(p, t).1[0])
-        .sum();
-    sum / poses.len() as f64
+    PoseAccuracy::of(poses, truth).unwrap().mean_deg[0]
 }
 
 #[test]
@@ -664,9 +660,9 @@ fn a_frame_turned_half_a_turn_registers_to_the_turned_pose() {
     ];
     for (name, opts) in levels {
         let reg = FrameRegistrar::new(parts, opts).unwrap();
-        let (mut scene, mut fixed) = ([0.0f64; 4], [0.0f64; 4]);
-        let used: Vec<usize> = (0..frames.len()).step_by(2).collect();
-        for &i in &used {
+        let (mut found, mut found_turned, mut truth_used, mut truth_turned) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for i in (0..frames.len()).step_by(2) {
             let gain = parts.light.gains[i];
             let plain = FrameObs {
                 frame: &frames[i],
@@ -680,25 +676,23 @@ fn a_frame_turned_half_a_turn_registers_to_the_turned_pose() {
                 mask: None,
             };
             let turned_truth = truth[i] * turn;
-            let a = reg.refine_frame(&plain, &truth[i]).unwrap();
-            let b = reg.refine_frame(&turned, &turned_truth).unwrap();
-            let (ta, ra) = pose_error_axes(&a.pose, &truth[i]);
-            let (tb, rb) = pose_error_axes(&b.pose, &turned_truth);
-            let n = used.len() as f64;
-            // x and y of the camera: pitch, yaw, sideways shifts.
-            for (k, (p, q)) in [
-                (ra[0], rb[0]),
-                (ra[1], rb[1]),
-                (ta[0], tb[0]),
-                (ta[1], tb[1]),
-            ]
-            .into_iter()
-            .enumerate()
-            {
-                scene[k] += 0.5 * (p - q) / n;
-                fixed[k] += 0.5 * (p + q) / n;
-            }
+            found.push(reg.refine_frame(&plain, &truth[i]).unwrap().pose);
+            found_turned.push(reg.refine_frame(&turned, &turned_truth).unwrap().pose);
+            truth_used.push(truth[i]);
+            truth_turned.push(turned_truth);
         }
+        let a = PoseAccuracy::of(&found, &truth_used).unwrap();
+        let b = PoseAccuracy::of(&found_turned, &truth_turned).unwrap();
+        // x and y of the camera (pitch, yaw, sideways shifts): what turns with the scene
+        // changes sign, what is fixed to the image does not.
+        let pairs = [
+            (a.mean_deg[0], b.mean_deg[0]),
+            (a.mean_deg[1], b.mean_deg[1]),
+            (a.mean_mm[0], b.mean_mm[0]),
+            (a.mean_mm[1], b.mean_mm[1]),
+        ];
+        let scene = pairs.map(|(p, q)| 0.5 * (p - q));
+        let fixed = pairs.map(|(p, q)| 0.5 * (p + q));
         println!(
             "{name}: turning with the scene pitch {:.4} yaw {:.4} deg, x {:.4} y {:.4} mm; fixed to the image {:.5} {:.5} deg, {:.5} {:.5} mm",
             scene[0], scene[1], scene[2], scene[3], fixed[0], fixed[1], fixed[2], fixed[3]
