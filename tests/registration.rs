@@ -457,6 +457,17 @@ fn register_command_writes_poses_and_a_report_and_refuses_bad_input() {
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(err.contains("nowhere") && err.lines().count() == 1, "{err}");
     assert!(!dir.join("reg2").exists());
+    // A truth folder that is not there is named before any work.
+    let bad = run(&[
+        "--quiet", "register", "case", "--out", "reg3", "--truth", "no_truth",
+    ]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        err.contains("no_truth") && err.lines().count() == 1,
+        "{err}"
+    );
+    assert!(!dir.join("reg3").exists());
 }
 
 #[test]

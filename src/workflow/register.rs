@@ -15,7 +15,8 @@ use crate::model::manifest::BuildTimings;
 use crate::model::registration::{PoseRegistration, PoseTruth, TrackingSummary};
 use crate::workflow::build::PosesMode;
 use crate::workflow::build::{
-    pose_notes, poses_against_truth, register_poses, BuildError, BuildOptions, BuildScene,
+    check_truth_dir, pose_notes, poses_against_truth, register_poses, BuildError, BuildOptions,
+    BuildScene,
 };
 use crate::workflow::registration_overlays::overlays_html;
 use crate::Result;
@@ -46,6 +47,7 @@ pub fn register_command(
         )
         .into());
     }
+    check_truth_dir(opts.truth.as_deref(), false)?;
     let out_dir = OutputDir::create(out, opts.force)?;
     let mut timings = BuildTimings::default();
     let mut scene = BuildScene::prepare(case_dir, opts, &mut timings)?;

@@ -40,7 +40,7 @@ pub use gain_correction::refine_gains_against_texture;
 pub use light::CalibratedLight;
 pub use light_refit::{refit_light_with_albedo, sample_albedo, sample_uvs};
 pub use options::{BuildOptions, PosesMode};
-pub use pose_truth::poses_against_truth;
+pub use pose_truth::{check_truth_dir, poses_against_truth};
 pub use registration::{pose_notes, register_poses};
 pub use scene::BuildScene;
 pub use textures::{FusedAlbedo, Textures};
@@ -57,6 +57,7 @@ use crate::Result;
 /// Build the model of the case in `case_dir` into `out` (atomically).
 pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<ModelManifest> {
     let started = Instant::now();
+    check_truth_dir(opts.truth.as_deref(), true)?;
     let out_dir = OutputDir::create(out, opts.force)?;
     let mut timings = BuildTimings::default();
     let mut warnings = Vec::new();

@@ -7,8 +7,28 @@ use crate::io::poses::{read_poses, FrameRef, PoseEntry};
 use crate::math::Affine;
 use crate::model::registration::{PoseRegistration, PoseTruth};
 use crate::registration::accuracy::PoseAccuracy;
-use crate::Result;
+use crate::{Error, Result};
 use std::path::Path;
+
+/// Check a truth folder before any work is done: it must hold the true poses (poses.json), or,
+/// when `views_will_do`, reference views (views.json) instead.
+pub fn check_truth_dir(truth_dir: Option<&Path>, views_will_do: bool) -> Result<()> {
+    let Some(dir) = truth_dir else {
+        return Ok(());
+    };
+    if !dir.is_dir() {
+        return Err(Error::missing(dir, "the truth folder"));
+    }
+    let (poses, views) = (dir.join("poses.json"), dir.join("views.json"));
+    match (poses.exists(), views.exists() && views_will_do) {
+        (false, false) if views_will_do => Err(Error::missing(
+            views,
+            "the reference views (or poses.json, the true poses)",
+        )),
+        (false, false) => Err(Error::missing(poses, "the true poses")),
+        _ => Ok(()),
+    }
+}
 
 /// The poses of `registration` (or, without one, the scene's case as given) against
 /// `truth_dir/poses.json`, its images resolved in the case folder. `None` without a truth
