@@ -9,8 +9,9 @@
 //! ```
 //! `start=CASE/truth` starts from the true poses (what a round does to them: its bias);
 //! `kinds` gives each round's kind (G: geometry, T: texture, B: texture block by block, each of
-//! `blocks` runs of frames against a model fused from the other runs alone) in place of
-//! `rounds` and `first`;
+//! `blocks` runs of frames against a model fused from the other runs alone; I: the same with
+//! every `blocks`-th frame a block, so a frame's neighbours stay in its texture but the frame
+//! does not) in place of `rounds` and `first`;
 //! `floor`, `sigma`, `huber`, `gain`, `sat`, `coarsest`, `finest`, `chw` set the per-frame registration's options.
 //! Each round writes `round_N/errors.csv`: per frame, the error of its own (`measured`) and of
 //! the smoothed pose against the truth, in the true camera's axes (mm, degrees); and
@@ -158,9 +159,9 @@ fn case_copy(from: &Path, to: &Path, poses: &[PoseEntry]) -> anyhow::Result<()> 
     Ok(())
 }
 
-/// A texture round block by block: the video's frames in `blocks` runs, each registered against
-/// a model fused from the other runs' frames alone (its own errors, shared with its neighbours,
-/// are not in that texture). Gains are the full model's.
+/// A texture round block by block: the video's frames in `blocks` runs (`interleaved`: every
+/// `blocks`-th frame), each registered against a model fused from the other blocks' frames
+/// alone (its own errors are not in that texture). Gains are the full model's.
 #[allow(clippy::too_many_arguments)]
 fn refine_by_blocks(
     case_dir: &Path,
@@ -170,17 +171,27 @@ fn refine_by_blocks(
     gains: &[f64],
     current: &[Affine],
     blocks: usize,
+    interleaved: bool,
     build_opts: &BuildOptions,
     opts: &RegistrationOptions,
 ) -> anyhow::Result<bronchosim::registration::VideoRegistration> {
     let n = frames.len();
+    let mut slots: Vec<Option<(bronchosim::registration::FrameRegistration, Affine)>> =
+        vec![None; n];
     let mut all: Option<bronchosim::registration::VideoRegistration> = None;
     for k in 0..blocks {
-        let (lo, hi) = (k * n / blocks, (k + 1) * n / blocks);
+        let member = |i: usize| {
+            if interleaved {
+                i % blocks == k
+            } else {
+                i >= k * n / blocks && i < (k + 1) * n / blocks
+            }
+        };
+        let mine: Vec<usize> = (0..n).filter(|&i| member(i)).collect();
         let others: Vec<PoseEntry> = entries
             .iter()
             .enumerate()
-            .filter(|(i, _)| *i < lo || *i >= hi)
+            .filter(|(i, _)| !member(*i))
             .map(|(_, e)| e.clone())
             .collect();
         let bdir = dir.join(format!("block_{k}"));
@@ -188,7 +199,7 @@ fn refine_by_blocks(
             std::fs::remove_dir_all(&bdir)?;
         }
         case_copy(case_dir, &bdir.join("case"), &others)?;
-        for e in &entries[lo..hi] {
+        for e in mine.iter().map(|&i| &entries[i]) {
             if let bronchosim::io::poses::FrameRef::Image(i) = &e.frame {
                 std::fs::remove_file(bdir.join("case/frames").join(i.file_name().unwrap()))?;
             }
@@ -202,19 +213,27 @@ fn refine_by_blocks(
                 ..opts.clone()
             },
         )?;
+        let sub_gains: Vec<f64> = mine.iter().map(|&i| gains[i]).collect();
+        let sub_poses: Vec<Affine> = mine.iter().map(|&i| current[i]).collect();
+        let sub_frames: Vec<bronchosim::image::Frame> =
+            mine.iter().map(|&i| frames[i].clone()).collect();
         let v = refine_video(
             &reg,
-            &frames[lo..hi],
-            &gains[lo..hi],
+            &sub_frames,
+            &sub_gains,
             None,
-            &current[lo..hi],
-            &VideoOptions::default(),
+            &sub_poses,
+            &VideoOptions {
+                frame_numbers: mine.clone(),
+                ..VideoOptions::default()
+            },
         )?;
+        for (j, &i) in mine.iter().enumerate() {
+            slots[i] = Some((v.frames[j].clone(), v.measured[j]));
+        }
         match &mut all {
             None => all = Some(v),
             Some(a) => {
-                a.frames.extend(v.frames);
-                a.measured.extend(v.measured);
                 a.restarted += v.restarted;
                 for (key, c) in v.counts {
                     *a.counts.entry(key).or_default() += c;
@@ -222,7 +241,14 @@ fn refine_by_blocks(
             }
         }
     }
-    all.ok_or_else(|| anyhow::anyhow!("no blocks"))
+    let mut all = all.ok_or_else(|| anyhow::anyhow!("no blocks"))?;
+    let slots: Vec<_> = slots
+        .into_iter()
+        .map(|s| s.expect("every frame in a block"))
+        .collect();
+    all.frames = slots.iter().map(|s| s.0.clone()).collect();
+    all.measured = slots.iter().map(|s| s.1).collect();
+    Ok(all)
 }
 
 fn main() -> anyhow::Result<()> {
@@ -239,8 +265,9 @@ fn main() -> anyhow::Result<()> {
     let mut final_model = true;
     // Kind of each round: G (geometry, colour albedo) or T (texture); overrides rounds/first.
     let mut kinds: Option<Vec<bool>> = None;
-    // Rounds (1-based) registered block by block against a texture fused without the block.
-    let mut block_rounds: Vec<usize> = Vec::new();
+    // Rounds (1-based) registered block by block against a texture fused without the block,
+    // and whether the blocks are interleaved.
+    let mut block_rounds: Vec<(usize, bool)> = Vec::new();
     let mut blocks = 4usize;
     for kv in &args[2..] {
         match kv.split_once('=') {
@@ -257,8 +284,8 @@ fn main() -> anyhow::Result<()> {
                 block_rounds = v
                     .chars()
                     .enumerate()
-                    .filter(|(_, c)| *c == 'B')
-                    .map(|(i, _)| i + 1)
+                    .filter(|(_, c)| *c == 'B' || *c == 'I')
+                    .map(|(i, c)| (i + 1, c == 'I'))
                     .collect();
             }
             Some(("blocks", v)) => blocks = v.parse()?,
@@ -341,7 +368,7 @@ fn main() -> anyhow::Result<()> {
         } else {
             &frames
         };
-        let v = if block_rounds.contains(&r) {
+        let v = if let Some(&(_, interleaved)) = block_rounds.iter().find(|b| b.0 == r) {
             refine_by_blocks(
                 &case_dir,
                 &dir,
@@ -350,6 +377,7 @@ fn main() -> anyhow::Result<()> {
                 &light.gains,
                 &current,
                 blocks,
+                interleaved,
                 &build_opts,
                 &opts,
             )?
