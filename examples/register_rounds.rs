@@ -5,13 +5,15 @@
 //! ```sh
 //! cargo run --release --example register_rounds -- CASE WORK [rounds=3] [first=chroma|texture]
 //!     [start=DIR] [final=yes|no] [floor=F] [sigma=S] [huber=H] [gain=yes|no] [sat=S] [coarsest=L] [finest=L]
-//!     [chw=R,G,B] [kinds=GTTGTT] [blocks=4]
+//!     [chw=R,G,B] [kinds=GTTGTT] [blocks=4] [hp=6]
 //! ```
 //! `start=CASE/truth` starts from the true poses (what a round does to them: its bias);
 //! `kinds` gives each round's kind (G: geometry, T: texture, B: texture block by block, each of
 //! `blocks` runs of frames against a model fused from the other runs alone; I: the same with
 //! every `blocks`-th frame a block, so a frame's neighbours stay in its texture but the frame
-//! does not) in place of `rounds` and `first`;
+//! does not; H: a geometry round whose frames are also divided by the texture's detail the colour
+//! does not predict, seen from the frame's current pose, detail finer than a Gaussian of `hp`
+//! pixels) in place of `rounds` and `first`;
 //! `floor`, `sigma`, `huber`, `gain`, `sat`, `coarsest`, `finest`, `chw` set the per-frame registration's options.
 //! Each round writes `round_N/errors.csv`: per frame, the error of its own (`measured`) and of
 //! the smoothed pose against the truth, in the true camera's axes (mm, degrees); and
@@ -24,17 +26,22 @@
 //! alone, each frame divided by the albedo its colour predicts (`first=chroma`, the texture fused
 //! from the given poses follows their errors), or against the texture (`first=texture`).
 
+use bronchosim::image::Frame;
 use bronchosim::io::case::Case;
 use bronchosim::io::poses::{read_poses, write_poses, PoseEntry};
 use bronchosim::math::Affine;
 use bronchosim::model::Model;
 use bronchosim::registration::chroma::ChromaAlbedo;
+use bronchosim::registration::photometric::PhotometricModel;
 use bronchosim::registration::photometric::RayGrid;
 use bronchosim::registration::{
     pose_error, pose_error_axes, refine_video, FrameRegistrar, RegistrationOptions, VideoOptions,
 };
 use bronchosim::shading::ShadingKind;
+use bronchosim::volume::filter::gaussian_blur;
+use bronchosim::volume::Volume;
 use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -251,6 +258,56 @@ fn refine_by_blocks(
     Ok(all)
 }
 
+/// `frame` divided, per pixel and channel, by the detail of the texture seen from `pose` that
+/// the colour does not predict: texture / colour-predicted albedo, over its own Gaussian
+/// average (`sigma` pixels). The smooth part of that ratio is where the texture absorbed the
+/// shading's error; the detail is the albedo (vessels, patches) the colour misses.
+fn detail_divided(
+    frame: &Frame,
+    model: &PhotometricModel,
+    grid: &RayGrid,
+    pose: &Affine,
+    rel: &ChromaAlbedo,
+    sigma: f64,
+) -> Frame {
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    let view = model.view(grid, pose, 0.0);
+    let mut q = vec![[0.0f64; 3]; w * h];
+    let mut valid = vec![0.0f64; w * h];
+    for p in &view.points {
+        let i = p.ray as usize;
+        let a = p.albedo.map(f64::from);
+        if a.iter().all(|&v| v > 1e-6) {
+            let x = [(a[1] / a[0]).ln(), (a[2] / a[0]).ln()];
+            let pred = rel.albedo(x);
+            q[i] = std::array::from_fn(|c| (a[c] / pred[c]).ln());
+            valid[i] = 1.0;
+        }
+    }
+    // Normalised convolution of the log ratio over the valid pixels: the planes q·m (R, G, B)
+    // and m stacked as a volume, blurred across x and y only.
+    let mut planes = Volume::filled([w, h, 4], Affine::identity(), 0.0f32);
+    for (i, (qi, &m)) in q.iter().zip(&valid).enumerate() {
+        for (c, v) in qi.iter().enumerate() {
+            planes.data[c * w * h + i] = (v * m) as f32;
+        }
+        planes.data[3 * w * h + i] = m as f32;
+    }
+    gaussian_blur(&mut planes, [sigma, sigma, 0.0]);
+    let smooth = |c: usize, i: usize| f64::from(planes.data[c * w * h + i]);
+    let mut out = frame.clone();
+    for (i, (qi, &m)) in q.iter().zip(&valid).enumerate() {
+        if m == 0.0 || smooth(3, i) < 1e-3 {
+            continue;
+        }
+        for (c, v) in qi.iter().enumerate() {
+            let detail = v - smooth(c, i) / smooth(3, i);
+            out.rgb[3 * i + c] = (f64::from(frame.rgb[3 * i + c]) / detail.exp()) as f32;
+        }
+    }
+    out
+}
+
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let case_dir = PathBuf::from(&args[0]);
@@ -269,6 +326,10 @@ fn main() -> anyhow::Result<()> {
     // and whether the blocks are interleaved.
     let mut block_rounds: Vec<(usize, bool)> = Vec::new();
     let mut blocks = 4usize;
+    // Geometry rounds (H) whose frames are also divided by the texture's detail that the
+    // colour does not predict, rendered at the frame's current pose; its Gaussian sigma (px).
+    let mut hp_rounds: Vec<usize> = Vec::new();
+    let mut hp_sigma = 6.0f64;
     for kv in &args[2..] {
         match kv.split_once('=') {
             Some(("rounds", v)) => rounds = v.parse()?,
@@ -280,7 +341,13 @@ fn main() -> anyhow::Result<()> {
             Some(("huber", v)) => frame_opts.huber = v.parse()?,
             Some(("final", v)) => final_model = v == "yes",
             Some(("kinds", v)) => {
-                kinds = Some(v.chars().map(|c| c == 'G').collect());
+                kinds = Some(v.chars().map(|c| c == 'G' || c == 'H').collect());
+                hp_rounds = v
+                    .chars()
+                    .enumerate()
+                    .filter(|(_, c)| *c == 'H')
+                    .map(|(i, _)| i + 1)
+                    .collect();
                 block_rounds = v
                     .chars()
                     .enumerate()
@@ -289,6 +356,7 @@ fn main() -> anyhow::Result<()> {
                     .collect();
             }
             Some(("blocks", v)) => blocks = v.parse()?,
+            Some(("hp", v)) => hp_sigma = v.parse()?,
             Some(("gain", v)) => frame_opts.estimate_gain = v == "yes",
             Some(("sat", v)) => frame_opts.saturation_level = v.parse()?,
             Some(("coarsest", v)) => frame_opts.coarsest_level = v.parse()?,
@@ -360,10 +428,22 @@ fn main() -> anyhow::Result<()> {
             let grid = RayGrid::new(&model.manifest.camera, 2, 1);
             let every: Vec<Affine> = current.iter().step_by(4).copied().collect();
             let rel = ChromaAlbedo::fit(&reg.model, &grid, &every)?;
-            normalised = frames
-                .iter()
-                .map(|f| rel.normalise(f, frame_opts.saturation_level))
-                .collect();
+            normalised = if hp_rounds.contains(&r) {
+                let full = RayGrid::new(&model.manifest.camera, 0, 1);
+                frames
+                    .par_iter()
+                    .zip(&current)
+                    .map(|(f, pose)| {
+                        let n = rel.normalise(f, frame_opts.saturation_level);
+                        detail_divided(&n, &reg.model, &full, pose, &rel, hp_sigma)
+                    })
+                    .collect()
+            } else {
+                frames
+                    .iter()
+                    .map(|f| rel.normalise(f, frame_opts.saturation_level))
+                    .collect()
+            };
             &normalised
         } else {
             &frames
@@ -428,7 +508,11 @@ fn main() -> anyhow::Result<()> {
         let _ = n;
         println!(
             "round {r} ({}; build {t_build:.1} s, registration {t_reg:.1} s, {} restarted, {:?}): {}",
-            if chroma { "geometry, colour albedo" } else { "texture" },
+            match (chroma, hp_rounds.contains(&r)) {
+                (true, true) => "geometry, colour albedo and texture detail",
+                (true, false) => "geometry, colour albedo",
+                _ => "texture",
+            },
             v.restarted,
             v.counts,
             score(&poses_of(&entries), &truth)
