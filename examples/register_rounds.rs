@@ -31,7 +31,7 @@ use bronchosim::io::case::Case;
 use bronchosim::io::poses::{read_poses, write_poses, PoseEntry};
 use bronchosim::math::Affine;
 use bronchosim::model::Model;
-use bronchosim::registration::chroma::ChromaAlbedo;
+use bronchosim::registration::chroma::{chroma, ChromaAlbedo};
 use bronchosim::registration::photometric::PhotometricModel;
 use bronchosim::registration::photometric::RayGrid;
 use bronchosim::registration::{
@@ -277,8 +277,7 @@ fn detail_divided(
     for p in &view.points {
         let i = p.ray as usize;
         let a = p.albedo.map(f64::from);
-        if a.iter().all(|&v| v > 1e-6) {
-            let x = [(a[1] / a[0]).ln(), (a[2] / a[0]).ln()];
+        if let Some(x) = chroma(a) {
             let pred = rel.albedo(x);
             q[i] = std::array::from_fn(|c| (a[c] / pred[c]).ln());
             valid[i] = 1.0;
@@ -320,15 +319,10 @@ fn main() -> anyhow::Result<()> {
         ..Default::default()
     };
     let mut final_model = true;
-    // Kind of each round: G (geometry, colour albedo) or T (texture); overrides rounds/first.
-    let mut kinds: Option<Vec<bool>> = None;
-    // Rounds (1-based) registered block by block against a texture fused without the block,
-    // and whether the blocks are interleaved.
-    let mut block_rounds: Vec<(usize, bool)> = Vec::new();
+    // Kind of each round (G, H, T, B or I, see above); overrides rounds/first.
+    let mut kinds: Option<Vec<char>> = None;
     let mut blocks = 4usize;
-    // Geometry rounds (H) whose frames are also divided by the texture's detail that the
-    // colour does not predict, rendered at the frame's current pose; its Gaussian sigma (px).
-    let mut hp_rounds: Vec<usize> = Vec::new();
+    // Gaussian sigma (px) of the smooth part an H round keeps of the texture's detail.
     let mut hp_sigma = 6.0f64;
     for kv in &args[2..] {
         match kv.split_once('=') {
@@ -341,19 +335,10 @@ fn main() -> anyhow::Result<()> {
             Some(("huber", v)) => frame_opts.huber = v.parse()?,
             Some(("final", v)) => final_model = v == "yes",
             Some(("kinds", v)) => {
-                kinds = Some(v.chars().map(|c| c == 'G' || c == 'H').collect());
-                hp_rounds = v
-                    .chars()
-                    .enumerate()
-                    .filter(|(_, c)| *c == 'H')
-                    .map(|(i, _)| i + 1)
-                    .collect();
-                block_rounds = v
-                    .chars()
-                    .enumerate()
-                    .filter(|(_, c)| *c == 'B' || *c == 'I')
-                    .map(|(i, c)| (i + 1, c == 'I'))
-                    .collect();
+                if let Some(c) = v.chars().find(|c| !"GHTBI".contains(*c)) {
+                    anyhow::bail!("kinds={v}: unknown round kind {c} (G, H, T, B or I)");
+                }
+                kinds = Some(v.chars().collect());
             }
             Some(("blocks", v)) => blocks = v.parse()?,
             Some(("hp", v)) => hp_sigma = v.parse()?,
@@ -409,10 +394,12 @@ fn main() -> anyhow::Result<()> {
         let t_build = t.elapsed().as_secs_f64();
         let model = Model::load(&dir.join("model"))?;
         let light = model.calibrated().expect("calibrated light");
-        let chroma = match &kinds {
+        let kind = match &kinds {
             Some(k) => k[r - 1],
-            None => r == 1 && first_chroma,
+            None if r == 1 && first_chroma => 'G',
+            None => 'T',
         };
+        let chroma = matches!(kind, 'G' | 'H');
         let opts = RegistrationOptions {
             uniform_albedo_from_level: if chroma { 0 } else { usize::MAX },
             ..frame_opts.clone()
@@ -428,7 +415,7 @@ fn main() -> anyhow::Result<()> {
             let grid = RayGrid::new(&model.manifest.camera, 2, 1);
             let every: Vec<Affine> = current.iter().step_by(4).copied().collect();
             let rel = ChromaAlbedo::fit(&reg.model, &grid, &every)?;
-            normalised = if hp_rounds.contains(&r) {
+            normalised = if kind == 'H' {
                 let full = RayGrid::new(&model.manifest.camera, 0, 1);
                 frames
                     .par_iter()
@@ -448,7 +435,7 @@ fn main() -> anyhow::Result<()> {
         } else {
             &frames
         };
-        let v = if let Some(&(_, interleaved)) = block_rounds.iter().find(|b| b.0 == r) {
+        let v = if matches!(kind, 'B' | 'I') {
             refine_by_blocks(
                 &case_dir,
                 &dir,
@@ -457,7 +444,7 @@ fn main() -> anyhow::Result<()> {
                 &light.gains,
                 &current,
                 blocks,
-                interleaved,
+                kind == 'I',
                 &build_opts,
                 &opts,
             )?
@@ -508,9 +495,11 @@ fn main() -> anyhow::Result<()> {
         let _ = n;
         println!(
             "round {r} ({}; build {t_build:.1} s, registration {t_reg:.1} s, {} restarted, {:?}): {}",
-            match (chroma, hp_rounds.contains(&r)) {
-                (true, true) => "geometry, colour albedo and texture detail",
-                (true, false) => "geometry, colour albedo",
+            match kind {
+                'H' => "geometry, colour albedo and texture detail",
+                'G' => "geometry, colour albedo",
+                'B' => "texture, block by block",
+                'I' => "texture, interleaved blocks",
                 _ => "texture",
             },
             v.restarted,

@@ -21,7 +21,7 @@ fn phi(x: [f64; 2]) -> SVector<f64, 6> {
 }
 
 /// Log colour ratios (G/R, B/R) of an RGB value; `None` when a channel is not positive.
-fn chroma(rgb: [f64; 3]) -> Option<[f64; 2]> {
+pub fn chroma(rgb: [f64; 3]) -> Option<[f64; 2]> {
     (rgb.iter().all(|&v| v > 1e-6)).then(|| [(rgb[1] / rgb[0]).ln(), (rgb[2] / rgb[0]).ln()])
 }
 
