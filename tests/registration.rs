@@ -510,6 +510,35 @@ fn mean_pitch_deg(poses: &[Affine], truth: &[Affine]) -> f64 {
     PoseAccuracy::of(poses, truth).unwrap().mean_deg[0]
 }
 
+/// The tracker phantom with every pose turned 0.4 deg about its camera's x axis, and the model
+/// fused at those poses.
+struct PitchedPhantom {
+    case_dir: std::path::PathBuf,
+    entries: Vec<PoseEntry>,
+    truth: Vec<Affine>,
+    frames: Vec<Frame>,
+    pitched: Vec<Affine>,
+    model: Model,
+}
+
+fn pitched_phantom(dir: &Path) -> PitchedPhantom {
+    let (case_dir, case) = tracker_phantom(dir);
+    let truth = true_poses(&case_dir);
+    let frames: Vec<Frame> = case.frame_source().unwrap().map(|f| f.unwrap()).collect();
+    let turn = [0.0, 0.0, 0.0, 0.4f64.to_radians(), 0.0, 0.0];
+    let pitched: Vec<Affine> = truth.iter().map(|t| perturb(t, &turn)).collect();
+    case_with_poses(&case_dir, &dir.join("pitched"), &case.poses, &pitched);
+    let model = build(&dir.join("pitched"), &dir.join("pitched_model"));
+    PitchedPhantom {
+        case_dir,
+        entries: case.poses.clone(),
+        truth,
+        frames,
+        pitched,
+        model,
+    }
+}
+
 #[test]
 fn texture_rounds_shrink_an_error_every_frame_shares() {
     // Every pose turned 0.4 deg about its camera's x axis and the model fused at those poses:
@@ -517,15 +546,15 @@ fn texture_rounds_shrink_an_error_every_frame_shares() {
     // a wall from different distances says which way to turn them back.
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let (case_dir, case) = tracker_phantom(dir);
-    let truth = true_poses(&case_dir);
-    let frames: Vec<Frame> = case.frame_source().unwrap().map(|f| f.unwrap()).collect();
-    let entries = case.poses.clone();
-    let turn = [0.0, 0.0, 0.0, 0.4f64.to_radians(), 0.0, 0.0];
-    let pitched: Vec<Affine> = truth.iter().map(|t| perturb(t, &turn)).collect();
+    let PitchedPhantom {
+        case_dir,
+        entries,
+        truth,
+        frames,
+        pitched,
+        model: first,
+    } = pitched_phantom(dir);
     let start = mean_pitch_deg(&pitched, &truth);
-    case_with_poses(&case_dir, &dir.join("pitched"), &entries, &pitched);
-    let first = build(&dir.join("pitched"), &dir.join("pitched_model"));
     // Rounds as the build runs them: the model fused at the poses, then every frame
     // registered against it.
     let rounds = |grad_blend: f32, label: &str| {
@@ -565,6 +594,38 @@ fn texture_rounds_shrink_an_error_every_frame_shares() {
     let (f, m) = (frame_gradient[1], model_gradient[1]);
     assert!(f < 0.8 * start, "{f} deg");
     assert!(f < m, "{f} vs {m} deg");
+}
+
+#[test]
+fn a_shading_round_turns_back_an_error_every_frame_shares() {
+    // Every pose turned 0.4 deg about its camera's x axis and the model fused there. A geometry
+    // round pulls the poses toward its own bias (the albedo a frame's colour does not
+    // predict); a shading round holds the texture's albedo in the image, so the shading alone
+    // moves the poses, and it turns the shared pitch back.
+    let tmp = tempfile::tempdir().unwrap();
+    let PitchedPhantom {
+        truth,
+        frames,
+        pitched,
+        model,
+        ..
+    } = pitched_phantom(tmp.path());
+    let pitch_after = |kind: RoundKind| {
+        let v = register(&model, &frames, &pitched, kind);
+        let poses: Vec<Affine> = v.frames.iter().map(|f| f.pose).collect();
+        mean_pitch_deg(&poses, &truth)
+    };
+    let (shading, geometry) = (
+        pitch_after(RoundKind::Shading),
+        pitch_after(RoundKind::Geometry),
+    );
+    println!("shared pitch 0.400 deg, after a shading round {shading:.3} deg, after a geometry round {geometry:.3} deg");
+    // Measured: 0.115 deg after the shading round, 0.191 deg after the geometry round.
+    assert!(shading.abs() < 0.2, "{shading} deg");
+    assert!(
+        shading.abs() < geometry.abs(),
+        "{shading} vs {geometry} deg"
+    );
 }
 
 #[test]

@@ -137,6 +137,57 @@ impl ChromaAlbedo {
         }
         out
     }
+
+    /// `frame` (already [`ChromaAlbedo::normalise`]d) divided, per pixel, by the albedo the
+    /// model's texture shows from `pose` on `grid` (the frame's own pixel grid) over the albedo
+    /// the texture's colour predicts, relative to that ratio's mean over the frame: the albedo
+    /// the colour misses (brightness that changes without the colour, over a few mm) held in
+    /// the image, so that a pose step changes only the geometry's shading. Pixels the texture
+    /// does not cover, and saturated ones (a channel at `saturation_level` or above: dividing
+    /// them could bring them under it), are left as they are.
+    pub fn divide_texture_albedo(
+        &self,
+        frame: &Frame,
+        model: &PhotometricModel,
+        grid: &RayGrid,
+        pose: &Affine,
+        saturation_level: f32,
+    ) -> Frame {
+        let view = model.view(grid, pose, 0.0);
+        let ratios: Vec<(usize, [f64; 3])> = view
+            .points
+            .iter()
+            .filter_map(|p| {
+                let a = p.albedo.map(f64::from);
+                let pred = self.albedo(chroma(a)?);
+                Some((
+                    p.ray as usize,
+                    std::array::from_fn(|c| (a[c] / pred[c]).ln()),
+                ))
+            })
+            .filter(|(i, _)| 3 * i + 2 < frame.rgb.len())
+            .collect();
+        let mut out = frame.clone();
+        if ratios.is_empty() {
+            return out;
+        }
+        let mean: [f64; 3] = std::array::from_fn(|c| {
+            ratios.iter().map(|r| r.1[c]).sum::<f64>() / ratios.len() as f64
+        });
+        for (i, q) in ratios {
+            if frame.rgb[3 * i..3 * i + 3]
+                .iter()
+                .any(|&v| v >= saturation_level)
+            {
+                continue;
+            }
+            for c in 0..3 {
+                let v = f64::from(frame.rgb[3 * i + c]) / (q[c] - mean[c]).exp();
+                out.rgb[3 * i + c] = v as f32;
+            }
+        }
+        out
+    }
 }
 /// Sum of the RGB of the pixels within `radius` of (x, y) (clipped at the image's edges).
 fn neighbourhood_sum(frame: &Frame, x: usize, y: usize, radius: usize) -> [f64; 3] {

@@ -27,6 +27,16 @@ pub enum RoundKind {
     Geometry,
     /// The model's texture and light (later rounds).
     Texture,
+    /// The geometry's shading, each frame divided by the albedo its colour predicts and by the
+    /// albedo the texture shows from the frame's current pose beyond that
+    /// ([`ChromaAlbedo::divide_texture_albedo`]). The texture's pattern stays where it is in the
+    /// image, so only the shading moves the pose: where the texture rounds have made the poses
+    /// consistent, the albedo the colour misses no longer pulls the geometry's turn and shift
+    /// (demo phantom with the shared error of the registration alone, 0.213 deg median: mean
+    /// pitch / yaw +0.15 / -0.08 deg -> +0.07 / -0.01 deg; a geometry round leaves +0.23 /
+    /// -0.20 deg). From poorly registered frames the texture follows their errors and it sees
+    /// little (BENCHMARKS.md).
+    Shading,
 }
 
 /// Options of [`register_round`].
@@ -82,7 +92,7 @@ pub fn register_round(
     opts: &RoundOptions,
 ) -> Result<VideoRegistration> {
     let mut frame_opts = opts.frame.clone();
-    if kind == RoundKind::Geometry {
+    if kind != RoundKind::Texture {
         frame_opts.uniform_albedo_from_level = 0;
         frame_opts.uniform_channel_weights = opts.geometry_channel_weights;
         frame_opts.finest_level = frame_opts
@@ -93,7 +103,7 @@ pub fn register_round(
     let reg = FrameRegistrar::new(parts, frame_opts)?;
     match kind {
         RoundKind::Texture => refine_video(&reg, frames, gains, mask, poses, &opts.video),
-        RoundKind::Geometry => {
+        RoundKind::Geometry | RoundKind::Shading => {
             let grid = RayGrid::new(parts.camera, 2, 1);
             let some: Vec<Affine> = poses
                 .iter()
@@ -102,8 +112,19 @@ pub fn register_round(
                 .collect();
             let rel = ChromaAlbedo::fit(&reg.model, &grid, &some)?;
             let level = reg.opts.saturation_level;
-            let normalised: Vec<Frame> =
-                frames.par_iter().map(|f| rel.normalise(f, level)).collect();
+            // A shading round reads the texture on the frames' own pixel grid.
+            let full = (kind == RoundKind::Shading).then(|| RayGrid::new(parts.camera, 0, 1));
+            let normalised: Vec<Frame> = frames
+                .par_iter()
+                .zip(poses)
+                .map(|(f, pose)| {
+                    let n = rel.normalise(f, level);
+                    match &full {
+                        Some(grid) => rel.divide_texture_albedo(&n, &reg.model, grid, pose, level),
+                        None => n,
+                    }
+                })
+                .collect();
             let mut video = opts.video.clone();
             if let Some(prior) = &mut video.smooth {
                 prior.noise = opts.geometry_noise;
