@@ -247,7 +247,8 @@ pub struct BuildArgs {
     pub poses: PosesMode,
     /// Most rounds of the registration (light + texture, then every frame's pose); rounds
     /// 0, N, 2N, ... (N = --geometry-every) register against the CT's geometry alone, and so
-    /// does the round after a geometry round that leaves over a quarter of the frames outliers.
+    /// does the round after a geometry round that leaves over a quarter of the frames outliers;
+    /// from round 6 on those rounds also hold the texture's albedo in the image.
     #[arg(long, default_value_t = build_defaults().registration_rounds)]
     pub registration_rounds: usize,
     /// Every N-th registration round registers against the geometry again: the texture
@@ -275,7 +276,8 @@ pub struct RegisterArgs {
     pub out: PathBuf,
     /// Most rounds (light + texture, then every frame's pose); rounds 0, N, 2N, ...
     /// (N = --geometry-every) register against the CT's geometry alone, and so does the round
-    /// after a geometry round that leaves over a quarter of the frames outliers.
+    /// after a geometry round that leaves over a quarter of the frames outliers; from round 6
+    /// on those rounds also hold the texture's albedo in the image.
     #[arg(long, default_value_t = build_defaults().registration_rounds)]
     pub rounds: usize,
     /// Every N-th round registers against the geometry again: the texture cannot see an error

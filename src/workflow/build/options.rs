@@ -85,6 +85,11 @@ pub struct BuildOptions {
     /// texture rounds measures that again from poses the texture rounds made consistent
     /// (BENCHMARKS.md, issue 16).
     pub registration_geometry_every: usize,
+    /// From this round on, the geometry rounds are shading rounds
+    /// ([`crate::registration::RoundKind::Shading`]): the frames are also divided by the
+    /// texture's albedo seen from their poses, which helps only once the texture rounds have
+    /// made the poses consistent (demo phantom, 1.5 mm / 2 deg: BENCHMARKS.md, session 19).
+    pub registration_shading_from: usize,
     /// A geometry round is run again (within `registration_rounds`) while more than this share
     /// of its frames are outliers, their corrections departing from their neighbours': the
     /// texture fused after it would follow their errors (1 or more: never).
@@ -185,8 +190,12 @@ impl Default for BuildOptions {
             // five rounds 0.160 mm / 0.376 deg, 75; three 0.144 mm / 0.685 deg, 76). A geometry
             // round brings back a shared pitch / yaw of about 0.25 deg that the two texture
             // rounds after it take away (BENCHMARKS.md); the sixth costs 4 s of the demo.
-            registration_rounds: 6,
+            // G T T G T T S T T: the last three rounds took the demo phantom with 1.5 mm /
+            // 2 deg drift from 0.143 mm / 0.443 deg to 0.100 mm / 0.339 deg median, new views
+            // 30.64 -> 31.07 dB, for a third more registration time (BENCHMARKS.md).
+            registration_rounds: 9,
             registration_geometry_every: 3,
+            registration_shading_from: 6,
             // From tracker poses 3 mm / 4 deg off, the demo phantom's first geometry round
             // leaves 37 of 80 frames outliers, a second one 8; from 1.5 mm / 2 deg 10, and a
             // second round there was no better (BENCHMARKS.md, issue 16, session 12).
