@@ -5,7 +5,7 @@
 //! ```sh
 //! cargo run --release --example register_rounds -- CASE WORK [rounds=3] [first=chroma|texture]
 //!     [start=DIR] [final=yes|no] [floor=F] [sigma=S] [huber=H] [gain=yes|no] [sat=S] [coarsest=L] [finest=L]
-//!     [chw=R,G,B] [kinds=GTTGTT] [blocks=4] [hp=6]
+//!     [chw=R,G,B] [kinds=GTTGTT] [blocks=4] [hp=6] [fexp=E]
 //! ```
 //! `start=CASE/truth` starts from the true poses (what a round does to them: its bias);
 //! `kinds` gives each round's kind (G: geometry, T: texture, B: texture block by block, each of
@@ -13,8 +13,11 @@
 //! every `blocks`-th frame a block, so a frame's neighbours stay in its texture but the frame
 //! does not; H: a geometry round whose frames are also divided by the texture's detail the colour
 //! does not predict, seen from the frame's current pose, detail finer than a Gaussian of `hp`
-//! pixels) in place of `rounds` and `first`;
-//! `floor`, `sigma`, `huber`, `gain`, `sat`, `coarsest`, `finest`, `chw` set the per-frame registration's options.
+//! pixels; `hp=0`: all of it but its frame-wide mean, as the build's shading rounds) in place
+//! of `rounds` and `first`;
+//! `floor`, `sigma`, `huber`, `gain`, `sat`, `coarsest`, `finest`, `chw` set the per-frame registration's options;
+//! `fexp` fuses every round's model with the predicted intensity to the power E as the weight
+//! (2, the build's, puts near views first; -1 far views first).
 //! Each round writes `round_N/errors.csv`: per frame, the error of its own (`measured`) and of
 //! the smoothed pose against the truth, in the true camera's axes (mm, degrees); and
 //! `round_N/measurements.json`: per frame the start pose, its own refined pose, status, cost and
@@ -324,6 +327,8 @@ fn main() -> anyhow::Result<()> {
     let mut blocks = 4usize;
     // Gaussian sigma (px) of the smooth part an H round keeps of the texture's detail.
     let mut hp_sigma = 6.0f64;
+    // Power of the predicted intensity in the round models' fusion weights (None: the build's).
+    let mut fusion_exponent: Option<f32> = None;
     for kv in &args[2..] {
         match kv.split_once('=') {
             Some(("rounds", v)) => rounds = v.parse()?,
@@ -342,6 +347,7 @@ fn main() -> anyhow::Result<()> {
             }
             Some(("blocks", v)) => blocks = v.parse()?,
             Some(("hp", v)) => hp_sigma = v.parse()?,
+            Some(("fexp", v)) => fusion_exponent = Some(v.parse()?),
             Some(("gain", v)) => frame_opts.estimate_gain = v == "yes",
             Some(("sat", v)) => frame_opts.saturation_level = v.parse()?,
             Some(("coarsest", v)) => frame_opts.coarsest_level = v.parse()?,
@@ -371,7 +377,7 @@ fn main() -> anyhow::Result<()> {
     }
     let poses_of = |e: &[PoseEntry]| e.iter().map(|p| p.pose.camera_to_world).collect::<Vec<_>>();
     println!("round 0 (given): {}", score(&poses_of(&entries), &truth));
-    let build_opts = BuildOptions {
+    let mut build_opts = BuildOptions {
         cross_validate_every: 0,
         shading: Some(ShadingKind::Calibrated),
         poses: PosesMode::Fixed,
@@ -379,6 +385,10 @@ fn main() -> anyhow::Result<()> {
         force: true,
         ..Default::default()
     };
+    if let Some(e) = fusion_exponent {
+        build_opts.fusion.method =
+            bronchosim::texture::fusion::FusionMethod::WeightedAverage { weight_exponent: e };
+    }
     if let Some(k) = &kinds {
         rounds = k.len();
     }
@@ -421,8 +431,13 @@ fn main() -> anyhow::Result<()> {
                     .par_iter()
                     .zip(&current)
                     .map(|(f, pose)| {
-                        let n = rel.normalise(f, frame_opts.saturation_level);
-                        detail_divided(&n, &reg.model, &full, pose, &rel, hp_sigma)
+                        let level = frame_opts.saturation_level;
+                        let n = rel.normalise(f, level);
+                        match hp_sigma > 0.0 {
+                            true => detail_divided(&n, &reg.model, &full, pose, &rel, hp_sigma),
+                            // The build's shading round (registration::RoundKind::Shading).
+                            false => rel.divide_texture_albedo(&n, &reg.model, &full, pose, level),
+                        }
                     })
                     .collect()
             } else {
