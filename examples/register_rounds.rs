@@ -34,7 +34,7 @@ use bronchosim::io::case::Case;
 use bronchosim::io::poses::{read_poses, write_poses, PoseEntry};
 use bronchosim::math::Affine;
 use bronchosim::model::Model;
-use bronchosim::registration::chroma::{chroma, ChromaAlbedo};
+use bronchosim::registration::chroma::ChromaAlbedo;
 use bronchosim::registration::photometric::PhotometricModel;
 use bronchosim::registration::photometric::RayGrid;
 use bronchosim::registration::{
@@ -274,17 +274,11 @@ fn detail_divided(
     sigma: f64,
 ) -> Frame {
     let (w, h) = (frame.width as usize, frame.height as usize);
-    let view = model.view(grid, pose, 0.0);
     let mut q = vec![[0.0f64; 3]; w * h];
     let mut valid = vec![0.0f64; w * h];
-    for p in &view.points {
-        let i = p.ray as usize;
-        let a = p.albedo.map(f64::from);
-        if let Some(x) = chroma(a) {
-            let pred = rel.albedo(x);
-            q[i] = std::array::from_fn(|c| (a[c] / pred[c]).ln());
-            valid[i] = 1.0;
-        }
+    for (i, ratio) in rel.texture_log_ratio(model, grid, pose) {
+        q[i] = ratio;
+        valid[i] = 1.0;
     }
     // Normalised convolution of the log ratio over the valid pixels: the planes q·m (R, G, B)
     // and m stacked as a volume, blurred across x and y only.
@@ -485,7 +479,6 @@ fn main() -> anyhow::Result<()> {
             .zip(&current)
             .map(|(f, c)| bronchosim::registration::delta_between(c, &f.pose))
             .collect();
-        let n = deltas.len();
         for (k, (e, f)) in entries.iter_mut().zip(&v.frames).enumerate() {
             e.pose.camera_to_world = f.pose;
             if !chroma && relax != 1.0 {
@@ -507,7 +500,6 @@ fn main() -> anyhow::Result<()> {
                 e.pose.camera_to_world = bronchosim::registration::apply_delta(&f.pose, &extra);
             }
         }
-        let _ = n;
         println!(
             "round {r} ({}; build {t_build:.1} s, registration {t_reg:.1} s, {} restarted, {:?}): {}",
             match kind {

@@ -138,6 +138,30 @@ impl ChromaAlbedo {
         out
     }
 
+    /// Per ray of `grid` that meets the textured wall seen from `pose`: the ray's index and the
+    /// log of the texture's albedo over the albedo its colour predicts, per channel (what the
+    /// colour misses).
+    pub fn texture_log_ratio(
+        &self,
+        model: &PhotometricModel,
+        grid: &RayGrid,
+        pose: &Affine,
+    ) -> Vec<(usize, [f64; 3])> {
+        model
+            .view(grid, pose, 0.0)
+            .points
+            .iter()
+            .filter_map(|p| {
+                let a = p.albedo.map(f64::from);
+                let pred = self.albedo(chroma(a)?);
+                Some((
+                    p.ray as usize,
+                    std::array::from_fn(|c| (a[c] / pred[c]).ln()),
+                ))
+            })
+            .collect()
+    }
+
     /// `frame` (already [`ChromaAlbedo::normalise`]d) divided, per pixel, by the albedo the
     /// model's texture shows from `pose` on `grid` (the frame's own pixel grid) over the albedo
     /// the texture's colour predicts, relative to that ratio's mean over the frame: the albedo
@@ -153,18 +177,9 @@ impl ChromaAlbedo {
         pose: &Affine,
         saturation_level: f32,
     ) -> Frame {
-        let view = model.view(grid, pose, 0.0);
-        let ratios: Vec<(usize, [f64; 3])> = view
-            .points
-            .iter()
-            .filter_map(|p| {
-                let a = p.albedo.map(f64::from);
-                let pred = self.albedo(chroma(a)?);
-                Some((
-                    p.ray as usize,
-                    std::array::from_fn(|c| (a[c] / pred[c]).ln()),
-                ))
-            })
+        let ratios: Vec<(usize, [f64; 3])> = self
+            .texture_log_ratio(model, grid, pose)
+            .into_iter()
             .filter(|(i, _)| 3 * i + 2 < frame.rgb.len())
             .collect();
         let mut out = frame.clone();
