@@ -69,6 +69,9 @@ pub struct RegistrationOptions {
     /// A step whose translation is under this (mm) and whose rotation is under a hundredth of
     /// it (radians) ends a level's iterations; doubled per level.
     pub step_tolerance: f64,
+    /// A level ends when failed renders have shrunk the trust region below this fraction of
+    /// its starting size.
+    pub min_radius: f64,
 }
 
 impl Default for RegistrationOptions {
@@ -101,6 +104,7 @@ impl Default for RegistrationOptions {
             estimate_gain: true,
             min_points: 100,
             step_tolerance: 2e-3,
+            min_radius: 1.0 / 32.0,
         }
     }
 }
@@ -260,27 +264,29 @@ impl<'a> FrameRegistrar<'a> {
         };
         let before = self.snapshot(&pyr, finest, initial, 0.0, floor);
         let mut fail = before.as_ref().err().copied();
+        // The finest level ends with the model rendered at the pose it returns.
+        let mut last = None;
         if fail.is_none() {
             for level in (finest..=coarsest).rev() {
-                if let Err(status) = self.refine_level(&pyr, level, &mut state, floor) {
-                    fail = Some(status);
-                    break;
+                match self.refine_level(&pyr, level, &mut state, floor) {
+                    Ok(snapshot) => last = Some(snapshot),
+                    Err(status) => {
+                        fail = Some(status);
+                        break;
+                    }
                 }
             }
         }
-        let (pose, log_k) = match fail {
-            None => (state.pose, state.log_k),
-            Some(_) => (*initial, 0.0),
+        let (pose, log_k, after) = match (fail, &last) {
+            (None, Some(a)) => (state.pose, state.log_k, Ok(a)),
+            _ => (*initial, 0.0, before.as_ref()),
         };
-        let after = self.snapshot(&pyr, finest, &pose, log_k, floor);
-        let status = fail
-            .or(after.as_ref().err().copied())
-            .unwrap_or(if state.converged {
-                FrameStatus::Converged
-            } else {
-                FrameStatus::NotConverged
-            });
-        let (cost_after, points, information) = match &after {
+        let status = fail.or(after.err().copied()).unwrap_or(if state.converged {
+            FrameStatus::Converged
+        } else {
+            FrameStatus::NotConverged
+        });
+        let (cost_after, points, information) = match after {
             Ok(a) => (a.mean_cost, a.lin.used, pose_information(&a.lin.h)),
             Err(_) => (f64::NAN, 0, [[0.0; 6]; 6]),
         };

@@ -109,14 +109,15 @@ impl FrameRegistrar<'_> {
         })
     }
 
-    /// Refine `st` at `level`; `Err` when the model cannot be compared with the frame.
-    pub(crate) fn refine_level(
-        &self,
-        pyr: &ObservedPyramid,
+    /// Refine `st` at `level`; returns the model rendered at the pose it ends at, `Err` when the
+    /// model cannot be compared with the frame.
+    pub(crate) fn refine_level<'p>(
+        &'p self,
+        pyr: &'p ObservedPyramid,
         level: usize,
         st: &mut State,
         floor: f64,
-    ) -> Result<(), FrameStatus> {
+    ) -> Result<Snapshot<'p>, FrameStatus> {
         let o = &self.opts;
         let scale = (1u32 << level) as f64;
         let tol = o.step_tolerance * scale;
@@ -148,7 +149,7 @@ impl FrameRegistrar<'_> {
                 _ => {
                     radius *= 0.5;
                     lambda *= 4.0;
-                    if radius < 1.0 / 32.0 {
+                    if radius < o.min_radius {
                         st.converged = true;
                         break;
                     }
@@ -166,7 +167,7 @@ impl FrameRegistrar<'_> {
         }
         st.pose = cur.pose;
         st.log_k = cur.log_k;
-        Ok(())
+        Ok(cur)
     }
 }
 
