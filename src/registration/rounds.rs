@@ -106,17 +106,16 @@ pub fn register_round(
     opts: &RoundOptions,
 ) -> Result<VideoRegistration> {
     let mut frame_opts = opts.frame.clone();
-    if kind != RoundKind::Texture {
+    if kind == RoundKind::Texture {
+        frame_opts.step_tolerance = frame_opts.step_tolerance.max(opts.texture_step_tolerance);
+        frame_opts.min_radius = frame_opts.min_radius.max(opts.texture_min_radius);
+    } else {
         frame_opts.uniform_albedo_from_level = 0;
         frame_opts.uniform_channel_weights = opts.geometry_channel_weights;
         frame_opts.finest_level = frame_opts
             .finest_level
             .max(opts.geometry_finest_level)
             .min(frame_opts.coarsest_level);
-    }
-    if kind == RoundKind::Texture {
-        frame_opts.step_tolerance = frame_opts.step_tolerance.max(opts.texture_step_tolerance);
-        frame_opts.min_radius = frame_opts.min_radius.max(opts.texture_min_radius);
     }
     let reg = FrameRegistrar::new(parts, frame_opts)?;
     match kind {

@@ -295,14 +295,17 @@ fn run_rounds(
     Ok((rounds, given_score))
 }
 
-/// The coarsest pyramid level of the texture rounds after the first. They start from poses
-/// the rounds before have made consistent to a few tenths of a degree, under a pixel at level
-/// 1, and the coarser levels (a third of a round's renders) moved nothing: on the demo phantom
-/// with 3 mm / 4 deg drift new views 30.10 -> 30.13 dB, 0.410 -> 0.338 deg median; 1.5 mm /
-/// 2 deg 30.92 -> 30.98 dB, 0.317 -> 0.274 deg. On ATM_224 alone it gives the same poses, and
-/// with the texture rounds' tolerances and the later rounds' light 25.53 -> 25.21 dB
-/// (BENCHMARKS.md).
+/// The coarsest pyramid level of the texture rounds from round `LATER_TEXTURE_FROM_ROUND` on:
+/// those after the first texture round, or every texture round when the first geometry round
+/// was repeated (as on the 3 mm / 4 deg case below). They start from poses the rounds before
+/// have made consistent to a few tenths of a degree, under a pixel at level 1, and the coarser
+/// levels (a third of a round's renders) moved nothing: on the demo phantom with 3 mm / 4 deg
+/// drift new views 30.10 -> 30.13 dB, 0.410 -> 0.338 deg median; 1.5 mm / 2 deg 30.92 ->
+/// 30.98 dB, 0.317 -> 0.274 deg. On ATM_224 alone it gives the same poses, and with the texture
+/// rounds' tolerances and the later rounds' light 25.53 -> 25.21 dB (BENCHMARKS.md).
 const LATER_TEXTURE_COARSEST_LEVEL: usize = 1;
+/// The round from which texture rounds start at `LATER_TEXTURE_COARSEST_LEVEL`.
+const LATER_TEXTURE_FROM_ROUND: usize = 2;
 
 /// Whether a geometry round left the video consistent enough for a texture round: at most
 /// `max_share` of its frames are outliers. From tracker poses 3 mm / 4 deg off, the texture
@@ -344,6 +347,10 @@ fn run_round(
         RoundKind::Shading => "register (CT, texture held)",
         RoundKind::Texture => "register",
     };
+    let mut frame = RegistrationOptions::default();
+    if kind == RoundKind::Texture && round_index >= LATER_TEXTURE_FROM_ROUND {
+        frame.coarsest_level = LATER_TEXTURE_COARSEST_LEVEL;
+    }
     let progress = Progress::new(label, scene.frame_count() as u64, opts.quiet);
     let video = register_round(
         parts,
@@ -363,13 +370,7 @@ fn run_round(
                 blocks: (round_index > 0).then(BlockOptions::default),
                 ..VideoOptions::default()
             },
-            frame: RegistrationOptions {
-                coarsest_level: match (kind, round_index) {
-                    (RoundKind::Texture, 2..) => LATER_TEXTURE_COARSEST_LEVEL,
-                    _ => RegistrationOptions::default().coarsest_level,
-                },
-                ..RegistrationOptions::default()
-            },
+            frame,
             ..RoundOptions::default()
         },
     )?;
