@@ -2,7 +2,7 @@
 //! truth/lumen.ply, about 260k triangles, written on first use into $BRONCHOSIM_BENCH_DIR or
 //! the temporary folder): BVH build, closest hits for a 512x512 camera inside the trachea
 //! (as packets of 4x4 pixels, and one ray at a time) and for 2^20 incoherent rays, and a
-//! full G-buffer frame from the same pose. Threads follow RAYON_NUM_THREADS. Throughput is
+//! full G-buffer frame from the same pose, and its depth plane alone. Threads follow RAYON_NUM_THREADS. Throughput is
 //! reported in rays (elements) per second.
 
 #[path = "common/phantom_rays.rs"]
@@ -10,7 +10,7 @@ mod phantom_rays;
 
 use bronchosim::camera::Camera;
 use bronchosim::math::Affine;
-use bronchosim::raycast::{cast_frame_with, RayTable, Scene};
+use bronchosim::raycast::{cast_depth_with, cast_frame_with, RayTable, Scene};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rayon::prelude::*;
 use std::hint::black_box;
@@ -66,6 +66,10 @@ fn bench(c: &mut Criterion) {
     g.throughput(Throughput::Elements((side * side) as u64));
     g.bench_function("gbuffer_512", |bch| {
         bch.iter(|| cast_frame_with(&scene, &table, &pose))
+    });
+    // Its depth plane alone (what the fusions' visibility tests read).
+    g.bench_function("depth_512", |bch| {
+        bch.iter(|| cast_depth_with(&scene, &table, &pose))
     });
     g.finish();
 }

@@ -1,6 +1,6 @@
 //! The per-frame geometry buffer: what each pixel of a camera sees of the lumen.
 
-use super::scene::Scene;
+use super::scene::{Hit, Scene};
 use crate::camera::Camera;
 use crate::math::Affine;
 use rayon::prelude::*;
@@ -89,7 +89,7 @@ impl GBuffer {
     }
 }
 
-/// One pixel's record before the buffer is split into planes.
+/// One pixel's values in every plane ([`MISS`]: a pixel without a hit).
 #[derive(Clone, Copy)]
 struct Px {
     z: f32,
@@ -115,40 +115,105 @@ pub fn cast_frame(scene: &Scene, camera: &Camera, camera_to_world: &Affine) -> G
     cast_frame_with(scene, &RayTable::new(camera), camera_to_world)
 }
 
-/// Ray cast one frame with precomputed pixel rays (parallel over bands of image rows, traced
-/// in packets of neighbouring rays by [`Scene::closest_hits_image_rows`]).
-pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine) -> GBuffer {
-    let m = camera_to_world;
-    let org = [m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32];
-    let r = |d: &[f32; 3]| -> [f32; 3] {
+/// A camera pose's rays in world coordinates: the origin, and each camera-space direction
+/// rotated (in f64, then normalised) as every cast of this module turns them.
+struct WorldRays<'a> {
+    org: [f32; 3],
+    m: &'a Affine,
+}
+
+impl<'a> WorldRays<'a> {
+    fn new(camera_to_world: &'a Affine) -> WorldRays<'a> {
+        let m = camera_to_world;
+        WorldRays {
+            org: [m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32],
+            m,
+        }
+    }
+
+    #[inline]
+    fn dir(&self, d: &[f32; 3]) -> [f32; 3] {
+        let m = self.m;
         let v = [0, 1, 2]
             .map(|i| m[(i, 0)] * d[0] as f64 + m[(i, 1)] * d[1] as f64 + m[(i, 2)] * d[2] as f64);
         let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
         [(v[0] / l) as f32, (v[1] / l) as f32, (v[2] / l) as f32]
-    };
+    }
+
+    /// The closest hits of a band of image rows (`row` camera-space directions, `width` per
+    /// row) as packets of neighbouring rays; `dirs` receives the world directions.
+    fn trace_band(
+        &self,
+        scene: &Scene,
+        row: &[[f32; 3]],
+        width: usize,
+        dirs: &mut Vec<[f32; 3]>,
+        hits: &mut Vec<Option<Hit>>,
+    ) {
+        dirs.clear();
+        dirs.extend(row.iter().map(|d| self.dir(d)));
+        hits.clear();
+        hits.resize(dirs.len(), None);
+        scene.closest_hits_image_rows(self.org, dirs, width, f32::INFINITY, hits);
+    }
+}
+
+/// One band of image rows of each plane of a [`GBuffer`] being filled.
+struct Band<'a> {
+    z: &'a mut [f32],
+    point: &'a mut [[f32; 3]],
+    normal: &'a mut [[f32; 3]],
+    gamma: &'a mut [f32],
+    tri: &'a mut [u32],
+    bary: &'a mut [[f32; 2]],
+}
+
+/// Ray cast one frame with precomputed pixel rays (parallel over bands of image rows, traced
+/// in packets of neighbouring rays by [`Scene::closest_hits_image_rows`]; each band writes its
+/// rows of every plane).
+pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine) -> GBuffer {
+    let world = WorldRays::new(camera_to_world);
+    let org = world.org;
     let w = (rays.width as usize).max(1);
-    let mut px = vec![MISS; rays.dirs.len()];
-    // A band of image rows per task, traced as packets of neighbouring rays (tiles of
-    // 4 x TILE_ROWS), then turned into records.
-    px.par_chunks_mut(Scene::TILE_ROWS * w)
-        .zip(rays.dirs.par_chunks(Scene::TILE_ROWS * w))
+    let n = rays.dirs.len();
+    let mut g = GBuffer {
+        width: rays.width,
+        height: rays.height,
+        z: vec![MISS.z; n],
+        point: vec![MISS.point; n],
+        normal: vec![MISS.normal; n],
+        gamma: vec![MISS.gamma; n],
+        tri: vec![MISS.tri; n],
+        bary: vec![MISS.bary; n],
+    };
+    let rows = Scene::TILE_ROWS * w;
+    let bands: Vec<Band> =
+        g.z.chunks_mut(rows)
+            .zip(g.point.chunks_mut(rows))
+            .zip(g.normal.chunks_mut(rows))
+            .zip(g.gamma.chunks_mut(rows))
+            .zip(g.tri.chunks_mut(rows))
+            .zip(g.bary.chunks_mut(rows))
+            .map(|(((((z, point), normal), gamma), tri), bary)| Band {
+                z,
+                point,
+                normal,
+                gamma,
+                tri,
+                bary,
+            })
+            .collect();
+    bands
+        .into_par_iter()
+        .zip(rays.dirs.par_chunks(rows))
         .for_each_init(
             || (Vec::new(), Vec::new()),
             |(dirs, hits), (out, row)| {
-                dirs.clear();
-                dirs.extend(row.iter().map(r));
-                hits.clear();
-                hits.resize(dirs.len(), None);
-                scene.closest_hits_image_rows(org, dirs, w, f32::INFINITY, hits);
-                for ((o, dir), h) in out.iter_mut().zip(dirs.iter()).zip(hits.iter()) {
+                world.trace_band(scene, row, w, dirs, hits);
+                for (k, (dir, h)) in dirs.iter().zip(hits.iter()).enumerate() {
                     let Some(h) = h else {
                         continue;
                     };
-                    let point = [
-                        org[0] + h.t * dir[0],
-                        org[1] + h.t * dir[1],
-                        org[2] + h.t * dir[2],
-                    ];
                     let mut n = scene.shading_normal(h.tri, h.u, h.v);
                     // V points from the surface to the viewpoint, i.e. -dir.
                     let mut gamma = -(n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2]);
@@ -156,34 +221,41 @@ pub fn cast_frame_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine)
                         n = [-n[0], -n[1], -n[2]];
                         gamma = -gamma;
                     }
-                    *o = Px {
-                        z: h.t,
-                        point,
-                        normal: n,
-                        gamma: gamma.min(1.0),
-                        tri: h.tri,
-                        bary: [h.u, h.v],
-                    };
+                    out.z[k] = h.t;
+                    out.point[k] = [
+                        org[0] + h.t * dir[0],
+                        org[1] + h.t * dir[1],
+                        org[2] + h.t * dir[2],
+                    ];
+                    out.normal[k] = n;
+                    out.gamma[k] = gamma.min(1.0);
+                    out.tri[k] = h.tri;
+                    out.bary[k] = [h.u, h.v];
                 }
             },
         );
-    let mut g = GBuffer {
-        width: rays.width,
-        height: rays.height,
-        z: Vec::with_capacity(px.len()),
-        point: Vec::with_capacity(px.len()),
-        normal: Vec::with_capacity(px.len()),
-        gamma: Vec::with_capacity(px.len()),
-        tri: Vec::with_capacity(px.len()),
-        bary: Vec::with_capacity(px.len()),
-    };
-    for p in px {
-        g.z.push(p.z);
-        g.point.push(p.point);
-        g.normal.push(p.normal);
-        g.gamma.push(p.gamma);
-        g.tri.push(p.tri);
-        g.bary.push(p.bary);
-    }
     g
+}
+
+/// The distance plane of [`cast_frame_with`] alone (the same rays and hits, so the same
+/// values): what a visibility test needs, without a full G-buffer's normals and points.
+pub fn cast_depth_with(scene: &Scene, rays: &RayTable, camera_to_world: &Affine) -> Vec<f32> {
+    let world = WorldRays::new(camera_to_world);
+    let w = (rays.width as usize).max(1);
+    let rows = Scene::TILE_ROWS * w;
+    let mut z = vec![MISS.z; rays.dirs.len()];
+    z.par_chunks_mut(rows)
+        .zip(rays.dirs.par_chunks(rows))
+        .for_each_init(
+            || (Vec::new(), Vec::new()),
+            |(dirs, hits), (out, row)| {
+                world.trace_band(scene, row, w, dirs, hits);
+                for (o, h) in out.iter_mut().zip(hits.iter()) {
+                    if let Some(h) = h {
+                        *o = h.t;
+                    }
+                }
+            },
+        );
+    z
 }

@@ -41,7 +41,7 @@ impl DepthCache {
         let mut cache = DepthCache::new(n, budget_bytes, 0);
         let frame_bytes = 4 * scene.case.camera.width as usize * scene.case.camera.height as usize;
         for i in 0..n.min(budget_bytes / frame_bytes.max(1)) {
-            cache.offer(i, &scene.cast_full(i).z);
+            cache.offer(i, &scene.cast_full_depth(i));
         }
         cache
     }
@@ -142,9 +142,9 @@ impl FrameStream for CaseFrames<'_> {
             Some(d) if self.scene.cache.level == level => d,
             _ => {
                 self.depth = if working {
-                    self.scene.cast(index).z
+                    self.scene.cast_depth(index)
                 } else {
-                    self.scene.cast_full(index).z
+                    self.scene.cast_full_depth(index)
                 };
                 &self.depth
             }

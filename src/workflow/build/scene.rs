@@ -12,7 +12,7 @@ use crate::io::case::Case;
 use crate::io::poses::FrameRef;
 use crate::math::Affine;
 use crate::model::manifest::BuildTimings;
-use crate::raycast::{cast_frame_with, GBuffer, RayTable, Scene};
+use crate::raycast::{cast_depth_with, cast_frame_with, GBuffer, RayTable, Scene};
 use crate::render::triangle_uvs;
 use crate::shading::calibrated::cos_theta_of;
 use crate::shading::FrameShaders;
@@ -157,6 +157,27 @@ impl BuildScene {
         g
     }
 
+    /// The depth plane of [`BuildScene::cast`] alone (the same values).
+    pub fn cast_depth(&self, i: usize) -> Vec<f32> {
+        let mut z = cast_depth_with(&self.scene, &self.rays, &self.poses[i]);
+        if let Some(mask) = &self.mask {
+            mask_depth(&mut z, mask);
+        }
+        z
+    }
+
+    /// The depth plane of [`BuildScene::cast_full`] alone (the same values).
+    pub fn cast_full_depth(&self, i: usize) -> Vec<f32> {
+        if self.level == 0 {
+            return self.cast_depth(i);
+        }
+        let mut z = cast_depth_with(&self.scene, &self.full_rays, &self.poses[i]);
+        if let Some(mask) = &self.case.mask {
+            mask_depth(&mut z, &mask.image);
+        }
+        z
+    }
+
     /// A decoded frame at the working resolution.
     pub fn working_frame(&self, frame: Frame) -> Frame {
         if self.level == 0 {
@@ -252,5 +273,13 @@ fn working_level(case: &Case, scene: &Scene, texel_mm: f64) -> usize {
         ratio.log2().floor() as usize
     } else {
         0
+    }
+}
+
+/// Pixels outside `mask` (row-major, one flag per pixel) see nothing, as
+/// [`GBuffer::mask_out`] makes them.
+fn mask_depth(z: &mut [f32], mask: &[bool]) {
+    for (z, _) in z.iter_mut().zip(mask).filter(|(_, &m)| !m) {
+        *z = f32::INFINITY;
     }
 }
