@@ -8,7 +8,7 @@ use bronchosim::camera::Camera;
 use bronchosim::math::{Affine, Point3, Vector3};
 use bronchosim::mesh::TriMesh;
 use bronchosim::raycast::triangle::{intersect, ShearedRay};
-use bronchosim::raycast::{cast_depth_with, cast_frame, RayTable, Scene};
+use bronchosim::raycast::{cast_depth_with, cast_frame, mask_out_depth, RayTable, Scene};
 use meshes::{dot, icosphere, sub, Rng};
 use std::collections::HashMap;
 
@@ -257,7 +257,7 @@ fn agrees_with_embree_reference() {
 /// A distorted camera off the axis of an analytic cylinder (radius 5 mm, 512 facets) looking
 /// along it: per pixel, z equals the analytic ray–cylinder distance and gamma the analytic
 /// cosine, within the facets' sag; normals face the camera; open-end pixels miss. The
-/// depth-only cast gives the same z to the bit.
+/// depth-only cast gives the same z to the bit, also masked.
 #[test]
 fn gbuffer_matches_analytic_cylinder() {
     let (radius, segs, half) = (5.0f32, 512usize, 40.0f32);
@@ -303,6 +303,21 @@ fn gbuffer_matches_analytic_cylinder() {
                 .zip(&g.z)
                 .all(|(a, b)| a.to_bits() == b.to_bits()),
         "the depth-only cast differs from the G-buffer's z"
+    );
+    // Masked alike: a disc of the image left out.
+    let image: Vec<bool> = (0..160 * 120)
+        .map(|i: i32| (i % 160 - 60).pow(2) + (i / 160 - 50).pow(2) > 400)
+        .collect();
+    let (mut masked, mut masked_depth) = (g.clone(), depth.clone());
+    masked.mask_out(&image);
+    mask_out_depth(&mut masked_depth, &image);
+    assert!(
+        masked_depth
+            .iter()
+            .zip(&masked.z)
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+            && masked.hit_count() < g.hit_count(),
+        "the masked depth differs from the masked G-buffer's z"
     );
     let sag = radius as f64 * (1.0 - (std::f64::consts::PI / segs as f64).cos());
     let (mut n_hit, mut n_miss, mut worst_z, mut worst_gamma) = (0, 0, 0.0f64, 0.0f64);

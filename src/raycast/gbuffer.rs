@@ -89,6 +89,13 @@ impl GBuffer {
     }
 }
 
+/// A depth plane's [`GBuffer::mask_out`]: pixels where `image` is false see nothing.
+pub fn mask_out_depth(z: &mut [f32], image: &[bool]) {
+    for (z, _) in z.iter_mut().zip(image).filter(|(_, &m)| !m) {
+        *z = MISS.z;
+    }
+}
+
 /// One pixel's values in every plane ([`MISS`]: a pixel without a hit).
 #[derive(Clone, Copy)]
 struct Px {

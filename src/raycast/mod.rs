@@ -15,5 +15,7 @@ mod packet_avx;
 mod scene;
 pub mod triangle;
 
-pub use gbuffer::{cast_depth_with, cast_frame, cast_frame_with, GBuffer, RayTable};
+pub use gbuffer::{
+    cast_depth_with, cast_frame, cast_frame_with, mask_out_depth, GBuffer, RayTable,
+};
 pub use scene::{Hit, Scene};

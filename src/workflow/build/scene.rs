@@ -12,7 +12,7 @@ use crate::io::case::Case;
 use crate::io::poses::FrameRef;
 use crate::math::Affine;
 use crate::model::manifest::BuildTimings;
-use crate::raycast::{cast_depth_with, cast_frame_with, GBuffer, RayTable, Scene};
+use crate::raycast::{cast_depth_with, cast_frame_with, mask_out_depth, GBuffer, RayTable, Scene};
 use crate::render::triangle_uvs;
 use crate::shading::calibrated::cos_theta_of;
 use crate::shading::FrameShaders;
@@ -161,7 +161,7 @@ impl BuildScene {
     pub fn cast_depth(&self, i: usize) -> Vec<f32> {
         let mut z = cast_depth_with(&self.scene, &self.rays, &self.poses[i]);
         if let Some(mask) = &self.mask {
-            mask_depth(&mut z, mask);
+            mask_out_depth(&mut z, mask);
         }
         z
     }
@@ -173,7 +173,7 @@ impl BuildScene {
         }
         let mut z = cast_depth_with(&self.scene, &self.full_rays, &self.poses[i]);
         if let Some(mask) = &self.case.mask {
-            mask_depth(&mut z, &mask.image);
+            mask_out_depth(&mut z, &mask.image);
         }
         z
     }
@@ -273,13 +273,5 @@ fn working_level(case: &Case, scene: &Scene, texel_mm: f64) -> usize {
         ratio.log2().floor() as usize
     } else {
         0
-    }
-}
-
-/// Pixels outside `mask` (row-major, one flag per pixel) see nothing, as
-/// [`GBuffer::mask_out`] makes them.
-fn mask_depth(z: &mut [f32], mask: &[bool]) {
-    for (z, _) in z.iter_mut().zip(mask).filter(|(_, &m)| !m) {
-        *z = f32::INFINITY;
     }
 }
