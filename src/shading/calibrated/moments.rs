@@ -282,8 +282,15 @@ pub(crate) fn gathered_of(lay: &Layout, p: &[f64], f: usize, c: usize) -> f64 {
 /// The coefficient vector `y_fc = (g_f vec(rho_c s^T), ambient_fc, [g_f k_c gathered],
 /// [g_f k_c s])` from the parameters.
 pub(crate) fn y_of(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize) -> DVector<f64> {
+    let mut y = DVector::zeros(lay.d() + lay.extra());
+    y_into(lay, p, light, f, c, y.as_mut_slice());
+    y
+}
+
+/// [`y_of`] into `y` (length D + extra).
+fn y_into(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize, y: &mut [f64]) {
+    y.fill(0.0);
     let d = lay.d();
-    let mut y = DVector::zeros(d + lay.extra());
     let gf = p[lay.g_off() + f];
     let rho = &p[lay.c_off(c)..lay.c_off(c) + lay.nr];
     for j in 0..lay.nr {
@@ -304,7 +311,6 @@ pub(crate) fn y_of(lay: &Layout, p: &[f64], light: f64, f: usize, c: usize) -> D
             y[sp + k] = kc * e;
         }
     }
-    y
 }
 
 /// The weighted cost `sum_fc y^T G y - 2 h^T y + s` at parameters `p`.
@@ -322,57 +328,77 @@ pub(crate) fn cost(lay: &Layout, m: &[FrameMoments], p: &[f64]) -> f64 {
 
 /// Gauss–Newton matrix `H = sum J^T G J` and half-gradient `J^T (G y - h)` over all
 /// parameters (dense; a few hundred parameters at most), and the cost. The frames' shares are
-/// computed in parallel and added in frame order, so the result does not depend on the
-/// threads.
+/// computed in parallel into one buffer and added in frame order, so the result does not
+/// depend on the threads.
 pub(crate) fn normal_equations(
     lay: &Layout,
     m: &[FrameMoments],
     p: &[f64],
 ) -> (DMatrix<f64>, DVector<f64>, f64) {
     let np = lay.len();
-    let shares: Vec<[LocalTerms; 3]> = m
-        .par_iter()
+    let n = local_len(lay);
+    let d1 = lay.d() + lay.extra();
+    // Per frame: 3 channels' blocks of J^T G J (n x n each), of J^T (G y - h) and costs.
+    let mut hl = vec![0.0; m.len() * 3 * n * n];
+    let mut gl = vec![0.0; m.len() * 3 * n];
+    let mut costs = vec![0.0; m.len() * 3];
+    hl.par_chunks_mut(3 * n * n)
+        .zip(gl.par_chunks_mut(3 * n))
+        .zip(costs.par_chunks_mut(3))
         .enumerate()
-        .map(|(f, fm)| std::array::from_fn(|c| local_terms(lay, fm, p, f, c)))
-        .collect();
+        .for_each_init(
+            || LocalScratch::new(d1, n),
+            |scratch, (f, ((hl, gl), costs))| {
+                for c in 0..3 {
+                    costs[c] = local_terms(
+                        lay,
+                        &m[f],
+                        p,
+                        f,
+                        c,
+                        scratch,
+                        &mut hl[c * n * n..(c + 1) * n * n],
+                        &mut gl[c * n..(c + 1) * n],
+                    );
+                }
+            },
+        );
     let mut hm = DMatrix::zeros(np, np);
     let mut grad = DVector::zeros(np);
     let mut total = 0.0;
-    for t in shares.iter().flatten() {
-        total += t.cost;
-        let n = t.idx.len();
-        for (a, &ia) in t.idx.iter().enumerate() {
-            grad[ia] += t.gl[a];
-            for (b, &ib) in t.idx.iter().enumerate() {
-                hm[(ia, ib)] += t.hl[a * n + b];
+    let mut idx = Vec::with_capacity(n);
+    for f in 0..m.len() {
+        for c in 0..3 {
+            let k = 3 * f + c;
+            total += costs[k];
+            local_indices(lay, f, c, &mut idx);
+            let (hl, gl) = (&hl[k * n * n..(k + 1) * n * n], &gl[k * n..(k + 1) * n]);
+            for (a, &ia) in idx.iter().enumerate() {
+                grad[ia] += gl[a];
+                for (b, &ib) in idx.iter().enumerate() {
+                    hm[(ia, ib)] += hl[a * n + b];
+                }
             }
         }
     }
     (hm, grad, total.max(0.0))
 }
 
-/// Frame f, channel c's share of the normal equations: the parameters its coefficients
-/// depend on, its block of `J^T G J` (row-major) and of `J^T (G y - h)`, and its cost.
-struct LocalTerms {
-    idx: Vec<usize>,
-    hl: Vec<f64>,
-    gl: Vec<f64>,
-    cost: f64,
+/// Parameters one frame and channel's coefficients depend on.
+fn local_len(lay: &Layout) -> usize {
+    lay.nr
+        + lay.ns
+        + usize::from(lay.ambient)
+        + usize::from(lay.interreflection)
+        + usize::from(lay.gathered)
+        + usize::from(lay.specular.is_some())
 }
 
-fn local_terms(lay: &Layout, fm: &FrameMoments, p: &[f64], f: usize, c: usize) -> LocalTerms {
-    let d = lay.d();
-    let d1 = d + lay.extra();
-    let gf = p[lay.g_off() + f];
-    let y = y_of(lay, p, fm.light, f, c);
-    let gm = fm.g(c);
-    let gy = gm * &y;
-    let cost = y.dot(&gy) - 2.0 * fm.h[c].dot(&y) + fm.s[c];
-    let r = gy - &fm.h[c];
-    // Local Jacobian dy/dparams, columns: rho_c (nr), s_1.. (ns - 1), g_f, then the optional
-    // ones in idx's order. It is sparse (each coefficient of y depends on a few parameters),
-    // so it is kept as (row, column, value) entries.
-    let mut idx: Vec<usize> = (0..lay.nr).map(|j| lay.c_off(c) + j).collect();
+/// Frame f, channel c's parameters, in the order of its local Jacobian's columns: rho_c (nr),
+/// s_1.. (ns - 1), g_f, then the optional ones.
+fn local_indices(lay: &Layout, f: usize, c: usize, idx: &mut Vec<usize>) {
+    idx.clear();
+    idx.extend((0..lay.nr).map(|j| lay.c_off(c) + j));
     idx.extend((1..lay.ns).map(|k| lay.e_off() + k - 1));
     idx.push(lay.g_off() + f);
     if lay.ambient {
@@ -387,6 +413,57 @@ fn local_terms(lay: &Layout, fm: &FrameMoments, p: &[f64], f: usize, c: usize) -
     if lay.specular.is_some() {
         idx.push(lay.k_idx(c));
     }
+}
+
+/// Buffers one thread reuses for every frame's [`local_terms`]: the normal equations are
+/// formed thousands of times per fit, each from 3 x frames small blocks.
+struct LocalScratch {
+    y: DVector<f64>,
+    gy: DVector<f64>,
+    jac: Vec<(usize, usize, f64)>,
+    gj: Vec<f64>,
+}
+
+impl LocalScratch {
+    fn new(d1: usize, n: usize) -> Self {
+        LocalScratch {
+            y: DVector::zeros(d1),
+            gy: DVector::zeros(d1),
+            jac: Vec::new(),
+            gj: vec![0.0; d1 * n],
+        }
+    }
+}
+
+/// Frame f, channel c's share of the normal equations: its block of `J^T G J` into `hl`
+/// (row-major, over [`local_indices`]) and of `J^T (G y - h)` into `gl`; returns its cost.
+#[allow(clippy::too_many_arguments)]
+fn local_terms(
+    lay: &Layout,
+    fm: &FrameMoments,
+    p: &[f64],
+    f: usize,
+    c: usize,
+    scratch: &mut LocalScratch,
+    hl: &mut [f64],
+    gl: &mut [f64],
+) -> f64 {
+    let d = lay.d();
+    let d1 = d + lay.extra();
+    let gf = p[lay.g_off() + f];
+    let LocalScratch { y, gy, jac, gj } = scratch;
+    y_into(lay, p, fm.light, f, c, y.as_mut_slice());
+    let gm = fm.g(c);
+    gm.mul_to(y, gy);
+    let cost = y.dot(gy) - 2.0 * fm.h[c].dot(y) + fm.s[c];
+    // The residual G y - h, in place of G y.
+    for (r, h) in gy.iter_mut().zip(fm.h[c].iter()) {
+        *r -= h;
+    }
+    let r = &*gy;
+    // Local Jacobian dy/dparams, columns in [`local_indices`]' order. It is sparse (each
+    // coefficient of y depends on a few parameters), so it is kept as (row, column, value)
+    // entries.
     let col_g = lay.nr + lay.ns - 1;
     let mut next = col_g + 1 + usize::from(lay.ambient);
     let col_kappa = next;
@@ -394,7 +471,7 @@ fn local_terms(lay: &Layout, fm: &FrameMoments, p: &[f64], f: usize, c: usize) -
     let col_q = next;
     next += usize::from(lay.gathered);
     let col_k = next;
-    let mut jac: Vec<(usize, usize, f64)> = Vec::with_capacity(4 * d + 2 * lay.ns + 4);
+    jac.clear();
     let rho = &p[lay.c_off(c)..lay.c_off(c) + lay.nr];
     for j in 0..lay.nr {
         for k in 0..lay.ns {
@@ -429,24 +506,26 @@ fn local_terms(lay: &Layout, fm: &FrameMoments, p: &[f64], f: usize, c: usize) -
             }
         }
     }
-    let n = idx.len();
-    // G J (d1 x n, column-major): G is symmetric, so its column `row` is its row `row`.
-    let mut gj = vec![0.0; d1 * n];
-    for &(row, col, v) in &jac {
-        let g_col = gm.column(row);
-        for (out, &g) in gj[col * d1..(col + 1) * d1].iter_mut().zip(g_col.iter()) {
+    let n = gl.len();
+    // G J (d1 x n, column-major). G is symmetric, so its column `row` (contiguous in
+    // nalgebra's column-major storage) is its row `row`.
+    gj.fill(0.0);
+    let g_all = gm.as_slice();
+    for &(row, col, v) in jac.iter() {
+        let g_col = &g_all[row * d1..(row + 1) * d1];
+        for (out, &g) in gj[col * d1..(col + 1) * d1].iter_mut().zip(g_col) {
             *out += g * v;
         }
     }
-    let mut hl = vec![0.0; n * n];
-    let mut gl = vec![0.0; n];
-    for &(row, col, v) in &jac {
+    hl.fill(0.0);
+    gl.fill(0.0);
+    for &(row, col, v) in jac.iter() {
         gl[col] += v * r[row];
         for b in 0..n {
             hl[col * n + b] += v * gj[b * d1 + row];
         }
     }
-    LocalTerms { idx, hl, gl, cost }
+    cost
 }
 
 #[cfg(test)]
