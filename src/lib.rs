@@ -12,6 +12,7 @@ pub mod io;
 pub mod math;
 pub mod mesh;
 pub mod model;
+pub mod parallel;
 pub mod phantom;
 pub mod raycast;
 pub mod registration;

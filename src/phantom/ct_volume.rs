@@ -8,6 +8,7 @@
 
 use super::anatomy::{AirwayTree, TreeOptions};
 use crate::math::{Affine, Point3};
+use crate::parallel::ordered_block_sum;
 use crate::rng::Pcg32;
 use crate::volume::Volume;
 use crate::{Error, Result};
@@ -156,7 +157,9 @@ pub fn make_ct_phantom(opts: &CtPhantomOptions) -> Result<CtPhantom> {
         .enumerate()
         .for_each(|(k, (cts, frs))| voxeliser.fill_slice(k, cts, frs));
     let voxel_ml = sp[0] * sp[1] * sp[2] / 1000.0;
-    let truth_volume_ml = frac.par_iter().map(|&f| f as f64).sum::<f64>() * voxel_ml;
+    let fractions = |r: std::ops::Range<usize>| frac[r].iter().map(|&f| f64::from(f)).sum::<f64>();
+    let truth_volume_ml =
+        ordered_block_sum(frac.len(), slice, 0.0, fractions, |a, b| a + b) * voxel_ml;
     let truth = frac.par_iter().map(|&f| u8::from(f >= 0.5)).collect();
     Ok(CtPhantom {
         ct: Volume::from_data(grid.dims, grid.affine, ct)?,

@@ -8,6 +8,7 @@ use super::fit::CalibratedOptions;
 use super::moments::Layout;
 use super::samples::PooledSamples;
 use super::specular::lobe;
+use crate::parallel::ordered_block_sum;
 use crate::shading::bernstein::bernstein_eval;
 use rayon::prelude::*;
 
@@ -106,28 +107,28 @@ pub(super) fn residual_rms(
     p: &[f64],
 ) -> ([f64; 3], f64) {
     let sc = s_coeffs(lay, p);
-    let (sums, ws) = (0..samples.len())
-        .into_par_iter()
-        .with_min_len(4096)
-        .fold(
-            || ([0.0f64; 3], 0.0f64),
-            |(mut acc, ws), i| {
+    let (sums, ws) = ordered_block_sum(
+        samples.len(),
+        4096,
+        ([0.0f64; 3], 0.0f64),
+        |range| {
+            let (mut acc, mut ws) = ([0.0f64; 3], 0.0f64);
+            for i in range {
                 let wi = f64::from(w[i]);
                 if wi == 0.0 {
-                    return (acc, ws);
+                    continue;
                 }
                 let pr = predict(lay, p, &sc, samples, t, albedo, i);
                 for c in 0..3 {
                     let e = f64::from(samples.rgb[c][i]) - pr[c];
                     acc[c] += wi * e * e;
                 }
-                (acc, ws + wi)
-            },
-        )
-        .reduce(
-            || ([0.0; 3], 0.0),
-            |(a, wa), (b, wb)| ([a[0] + b[0], a[1] + b[1], a[2] + b[2]], wa + wb),
-        );
+                ws += wi;
+            }
+            (acc, ws)
+        },
+        |(a, wa), (b, wb)| ([a[0] + b[0], a[1] + b[1], a[2] + b[2]], wa + wb),
+    );
     (
         std::array::from_fn(|c| (sums[c] / ws.max(1e-300)).sqrt()),
         ws,

@@ -19,6 +19,7 @@
 
 use super::moments::{accumulate, Quadratic};
 use super::psi::PsiModel;
+use crate::parallel::ordered_block_sum;
 use crate::shading::bernstein::eval3;
 use crate::shading::error::check_weights;
 use crate::shading::robust::Robust;
@@ -27,7 +28,6 @@ use crate::shading::solve::{solve_box_fixed, solve_spd};
 use crate::shading::ShadingError;
 use crate::Result;
 use nalgebra::SVector;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// The name errors give this fit.
@@ -158,24 +158,25 @@ pub fn fit_psi(samples: &SampleSet, weights: &[f32], opts: &FitOptions) -> Resul
     }
 
     // Cost and RMS straight from the samples (the moment form loses digits near a perfect fit).
-    let (sums, wsum) = (0..n)
-        .into_par_iter()
-        .fold(
-            || ([0.0f64; 3], 0.0f64),
-            |(mut acc, ws), i| {
+    let (sums, wsum) = ordered_block_sum(
+        n,
+        4096,
+        ([0.0f64; 3], 0.0f64),
+        |range| {
+            let (mut acc, mut ws) = ([0.0f64; 3], 0.0f64);
+            for i in range {
                 let (g, ri) = gamma_r(i);
                 let wi = w(i);
                 for ch in 0..3 {
                     let e = psi_at(&params[ch], g, ri) - f64::from(samples.rgb[ch][i]);
                     acc[ch] += wi * e * e;
                 }
-                (acc, ws + wi)
-            },
-        )
-        .reduce(
-            || ([0.0; 3], 0.0),
-            |(a, wa), (b, wb)| ([a[0] + b[0], a[1] + b[1], a[2] + b[2]], wa + wb),
-        );
+                ws += wi;
+            }
+            (acc, ws)
+        },
+        |(a, wa), (b, wb)| ([a[0] + b[0], a[1] + b[1], a[2] + b[2]], wa + wb),
+    );
     for ch in 0..3 {
         reports[ch].cost = sums[ch];
     }

@@ -10,9 +10,9 @@
 // Indexing several parallel arrays (struct of arrays, channels) by one index reads clearer than zips.
 #![allow(clippy::needless_range_loop)]
 
+use crate::parallel::ordered_block_sum;
 use crate::shading::bernstein::basis3;
 use nalgebra::{SMatrix, SVector};
-use rayon::prelude::*;
 
 pub(crate) type Mat16 = SMatrix<f64, 16, 16>;
 pub(crate) type Vec16 = SVector<f64, 16>;
@@ -78,12 +78,13 @@ pub(crate) fn accumulate<const C: usize>(
     w: &(dyn Fn(usize) -> f64 + Sync),
     values: [&[f32]; C],
 ) -> [Quadratic; C] {
-    const CHUNK: usize = 4096;
-    let acc = (0..n.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|chunk| {
+    let acc = ordered_block_sum(
+        n,
+        4096,
+        Acc::<C>::zero(),
+        |range| {
             let mut a = Acc::<C>::zero();
-            for i in chunk * CHUNK..((chunk + 1) * CHUNK).min(n) {
+            for i in range {
                 let wi = w(i);
                 if wi == 0.0 {
                     continue;
@@ -107,8 +108,9 @@ pub(crate) fn accumulate<const C: usize>(
                 a.wsum += wi;
             }
             a
-        })
-        .reduce(Acc::zero, Acc::add);
+        },
+        Acc::add,
+    );
     let g = Mat16::from_fn(|r, c| if r <= c { acc.g[r][c] } else { acc.g[c][r] });
     std::array::from_fn(|c| Quadratic {
         g,
