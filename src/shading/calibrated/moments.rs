@@ -326,17 +326,63 @@ pub(crate) fn cost(lay: &Layout, m: &[FrameMoments], p: &[f64]) -> f64 {
     total.max(0.0)
 }
 
+/// The parameters a solver step updates: [`normal_equations`] forms only their rows and
+/// columns of `H` and their entries of the gradient, which is all a block step reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Block {
+    /// Every parameter (the Levenberg–Marquardt polish).
+    All,
+    /// rho of every channel.
+    Rho,
+    /// s_1.. (s_0 is fixed to 1).
+    S,
+    /// The gains and, when in the model, the ambient terms.
+    Gains,
+    /// kappa.
+    Kappa,
+    /// The gathered light's factor k.
+    Gathered,
+    /// The specular colour k.
+    Specular,
+}
+
+impl Block {
+    /// Which columns of a frame and channel's local Jacobian (in [`local_indices`]' order)
+    /// the block holds.
+    fn local_columns(self, lay: &Layout) -> Vec<bool> {
+        let col_g = lay.nr + lay.ns - 1;
+        let col_kappa = col_g + 1 + usize::from(lay.ambient);
+        let col_q = col_kappa + usize::from(lay.interreflection);
+        let col_k = col_q + usize::from(lay.gathered);
+        (0..local_len(lay))
+            .map(|col| match self {
+                Block::All => true,
+                Block::Rho => col < lay.nr,
+                Block::S => (lay.nr..col_g).contains(&col),
+                Block::Gains => col == col_g || (lay.ambient && col == col_g + 1),
+                Block::Kappa => lay.interreflection && col == col_kappa,
+                Block::Gathered => lay.gathered && col == col_q,
+                Block::Specular => lay.specular.is_some() && col == col_k,
+            })
+            .collect()
+    }
+}
+
 /// Gauss–Newton matrix `H = sum J^T G J` and half-gradient `J^T (G y - h)` over all
-/// parameters (dense; a few hundred parameters at most), and the cost. The frames' shares are
-/// computed in parallel into one buffer and added in frame order, so the result does not
-/// depend on the threads.
+/// parameters (dense; a few hundred parameters at most), and the cost. Only `block`'s rows and
+/// columns of `H` and entries of the gradient are formed (the rest are 0); each is the same to
+/// the bit as with [`Block::All`]. The frames' shares are computed in parallel into one buffer
+/// and added in frame order, so the result does not depend on the threads.
 pub(crate) fn normal_equations(
     lay: &Layout,
     m: &[FrameMoments],
     p: &[f64],
+    block: Block,
 ) -> (DMatrix<f64>, DVector<f64>, f64) {
     let np = lay.len();
     let n = local_len(lay);
+    let want = block.local_columns(lay);
+    let wanted: Vec<usize> = (0..n).filter(|&b| want[b]).collect();
     let d1 = lay.d() + lay.extra();
     // Per frame: 3 channels' blocks of J^T G J (n x n each), of J^T (G y - h) and costs.
     let mut hl = vec![0.0; m.len() * 3 * n * n];
@@ -356,6 +402,7 @@ pub(crate) fn normal_equations(
                         p,
                         f,
                         c,
+                        &wanted,
                         scratch,
                         &mut hl[c * n * n..(c + 1) * n * n],
                         &mut gl[c * n..(c + 1) * n],
@@ -373,16 +420,20 @@ pub(crate) fn normal_equations(
             total += costs[k];
             local_indices(lay, f, c, &mut idx);
             let (hl, gl) = (&hl[k * n * n..(k + 1) * n * n], &gl[k * n..(k + 1) * n]);
-            for (a, &ia) in idx.iter().enumerate() {
-                grad[ia] += gl[a];
-                for (b, &ib) in idx.iter().enumerate() {
-                    hm[(ia, ib)] += hl[a * n + b];
+            for &a in &wanted {
+                grad[idx[a]] += gl[a];
+                for &b in &wanted {
+                    hm[(idx[a], idx[b])] += hl[a * n + b];
                 }
             }
         }
     }
     (hm, grad, total.max(0.0))
 }
+
+/// Most parameters one frame and channel's coefficients depend on (rho and s of degree 9,
+/// every optional term).
+const MAX_LOCAL: usize = 24;
 
 /// Parameters one frame and channel's coefficients depend on.
 fn local_len(lay: &Layout) -> usize {
@@ -436,7 +487,8 @@ impl LocalScratch {
 }
 
 /// Frame f, channel c's share of the normal equations: its block of `J^T G J` into `hl`
-/// (row-major, over [`local_indices`]) and of `J^T (G y - h)` into `gl`; returns its cost.
+/// (row-major, over [`local_indices`]) and of `J^T (G y - h)` into `gl`, the rows and columns
+/// `wanted` only (the others are left 0); returns its cost.
 #[allow(clippy::too_many_arguments)]
 fn local_terms(
     lay: &Layout,
@@ -444,6 +496,7 @@ fn local_terms(
     p: &[f64],
     f: usize,
     c: usize,
+    wanted: &[usize],
     scratch: &mut LocalScratch,
     hl: &mut [f64],
     gl: &mut [f64],
@@ -507,11 +560,15 @@ fn local_terms(
         }
     }
     let n = gl.len();
-    // G J (d1 x n, column-major). G is symmetric, so its column `row` (contiguous in
-    // nalgebra's column-major storage) is its row `row`.
+    let mut want = [false; MAX_LOCAL];
+    for &b in wanted {
+        want[b] = true;
+    }
+    // G J (d1 x n, column-major), the wanted columns. G is symmetric, so its column `row`
+    // (contiguous in nalgebra's column-major storage) is its row `row`.
     gj.fill(0.0);
     let g_all = gm.as_slice();
-    for &(row, col, v) in jac.iter() {
+    for &(row, col, v) in jac.iter().filter(|e| want[e.1]) {
         let g_col = &g_all[row * d1..(row + 1) * d1];
         for (out, &g) in gj[col * d1..(col + 1) * d1].iter_mut().zip(g_col) {
             *out += g * v;
@@ -519,9 +576,9 @@ fn local_terms(
     }
     hl.fill(0.0);
     gl.fill(0.0);
-    for &(row, col, v) in jac.iter() {
+    for &(row, col, v) in jac.iter().filter(|e| want[e.1]) {
         gl[col] += v * r[row];
-        for b in 0..n {
+        for &b in wanted {
             hl[col * n + b] += v * gj[b * d1 + row];
         }
     }
@@ -566,7 +623,7 @@ mod tests {
             })
             .collect();
         let p: Vec<f64> = (0..lay.len()).map(|_| 0.2 + rng.uniform()).collect();
-        let (h, grad, total) = normal_equations(&lay, &m, &p);
+        let (h, grad, total) = normal_equations(&lay, &m, &p, Block::All);
         let np = lay.len();
         let mut h_ref = DMatrix::<f64>::zeros(np, np);
         let mut g_ref = DVector::<f64>::zeros(np);
@@ -590,5 +647,40 @@ mod tests {
             "gradient differs"
         );
         assert!((total - cost(&lay, &m, &p)).abs() < 1e-9 * total.abs().max(1.0));
+
+        // Each block's rows and columns, and only those, the same to the bit as in the whole.
+        let blocks = [
+            (Block::Rho, (0..lay.e_off()).collect::<Vec<_>>()),
+            (Block::S, (lay.e_off()..lay.g_off()).collect()),
+            (Block::Gains, (lay.g_off()..lay.k_off()).collect()),
+            (Block::Kappa, (lay.k_off()..lay.q_off()).collect()),
+            (Block::Gathered, (lay.q_off()..lay.p_off()).collect()),
+            (Block::Specular, (lay.p_off()..lay.len()).collect()),
+        ];
+        for (block, params) in blocks {
+            let (hb, gb, tb) = normal_equations(&lay, &m, &p, block);
+            assert_eq!(tb.to_bits(), total.to_bits());
+            for i in 0..np {
+                let in_i = params.contains(&i);
+                let expected = if in_i { grad[i] } else { 0.0 };
+                assert_eq!(
+                    gb[i].to_bits(),
+                    expected.to_bits(),
+                    "{block:?} gradient {i}"
+                );
+                for j in 0..np {
+                    let expected = if in_i && params.contains(&j) {
+                        h[(i, j)]
+                    } else {
+                        0.0
+                    };
+                    assert_eq!(
+                        hb[(i, j)].to_bits(),
+                        expected.to_bits(),
+                        "{block:?} H {i} {j}"
+                    );
+                }
+            }
+        }
     }
 }

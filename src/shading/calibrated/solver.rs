@@ -7,7 +7,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use super::fit::{CalibratedOptions, CalibratedReport};
-use super::moments::{cost, normal_equations, FrameMoments, Layout};
+use super::moments::{cost, normal_equations, Block, FrameMoments, Layout};
 use crate::shading::bernstein::bernstein_eval;
 use crate::shading::solve::solve_box;
 use nalgebra::{DMatrix, DVector};
@@ -121,17 +121,17 @@ pub(super) fn solve(
     for _ in 0..opts.max_alternations.max(1) {
         rep.alternations += 1;
         // rho per channel (independent blocks).
-        let (h, g, _) = normal_equations(lay, m, &p);
+        let (h, g, _) = normal_equations(lay, m, &p, Block::Rho);
         for c in 0..3 {
             let idx: Vec<usize> = (0..lay.nr).map(|j| lay.c_off(c) + j).collect();
             block_step(&mut p, &h, &g, &idx, &lbs(&idx));
         }
         if lay.ns > 1 {
-            let (h, g, _) = normal_equations(lay, m, &p);
+            let (h, g, _) = normal_equations(lay, m, &p, Block::S);
             let idx: Vec<usize> = (1..lay.ns).map(|k| lay.e_off() + k - 1).collect();
             block_step(&mut p, &h, &g, &idx, &lbs(&idx));
         }
-        let (h, g, _) = normal_equations(lay, m, &p);
+        let (h, g, _) = normal_equations(lay, m, &p, Block::Gains);
         for f in 0..lay.frames {
             let mut idx = vec![lay.g_off() + f];
             if lay.ambient {
@@ -140,17 +140,17 @@ pub(super) fn solve(
             block_step(&mut p, &h, &g, &idx, &lbs(&idx));
         }
         if lay.interreflection {
-            let (h, g, _) = normal_equations(lay, m, &p);
+            let (h, g, _) = normal_equations(lay, m, &p, Block::Kappa);
             let idx: Vec<usize> = (0..3).map(|c| lay.k_off() + c).collect();
             block_step(&mut p, &h, &g, &idx, &lbs(&idx));
         }
         if lay.gathered {
-            let (h, g, _) = normal_equations(lay, m, &p);
+            let (h, g, _) = normal_equations(lay, m, &p, Block::Gathered);
             let idx: Vec<usize> = (0..3).map(|c| lay.q_off() + c).collect();
             block_step(&mut p, &h, &g, &idx, &lbs(&idx));
         }
         if lay.specular.is_some() {
-            let (h, g, _) = normal_equations(lay, m, &p);
+            let (h, g, _) = normal_equations(lay, m, &p, Block::Specular);
             let idx: Vec<usize> = (0..lay.spec_colours).map(|c| lay.p_off() + c).collect();
             block_step(&mut p, &h, &g, &idx, &lbs(&idx));
         }
@@ -185,7 +185,7 @@ fn lm_polish(
     let n = free.len();
     let mut lambda = 1e-6;
     for _ in 0..opts.max_lm_iterations {
-        let (h, g, c) = normal_equations(lay, m, &p);
+        let (h, g, c) = normal_equations(lay, m, &p, Block::All);
         c0 = c0.min(c);
         let hf = DMatrix::from_fn(n, n, |r, cc| h[(free[r], free[cc])]);
         let gf = DVector::from_fn(n, |r, _| -g[free[r]]);
