@@ -350,21 +350,38 @@ impl Block {
     /// Which columns of a frame and channel's local Jacobian (in [`local_indices`]' order)
     /// the block holds.
     fn local_columns(self, lay: &Layout) -> Vec<bool> {
-        let col_g = lay.nr + lay.ns - 1;
-        let col_kappa = col_g + 1 + usize::from(lay.ambient);
-        let col_q = col_kappa + usize::from(lay.interreflection);
-        let col_k = col_q + usize::from(lay.gathered);
+        let cols = LocalColumns::of(lay);
         (0..local_len(lay))
             .map(|col| match self {
                 Block::All => true,
                 Block::Rho => col < lay.nr,
-                Block::S => (lay.nr..col_g).contains(&col),
-                Block::Gains => col == col_g || (lay.ambient && col == col_g + 1),
-                Block::Kappa => lay.interreflection && col == col_kappa,
-                Block::Gathered => lay.gathered && col == col_q,
-                Block::Specular => lay.specular.is_some() && col == col_k,
+                Block::S => (lay.nr..cols.g).contains(&col),
+                Block::Gains => col == cols.g || (lay.ambient && col == cols.g + 1),
+                Block::Kappa => lay.interreflection && col == cols.kappa,
+                Block::Gathered => lay.gathered && col == cols.q,
+                Block::Specular => lay.specular.is_some() && col == cols.k,
             })
             .collect()
+    }
+}
+
+/// Where a frame and channel's local Jacobian holds the parameters after rho and s: the gain
+/// (the ambient term follows it when in the model), kappa, the gathered light's k and the
+/// specular colour's k; a column the model lacks holds the next one's index.
+struct LocalColumns {
+    g: usize,
+    kappa: usize,
+    q: usize,
+    k: usize,
+}
+
+impl LocalColumns {
+    fn of(lay: &Layout) -> Self {
+        let g = lay.nr + lay.ns - 1;
+        let kappa = g + 1 + usize::from(lay.ambient);
+        let q = kappa + usize::from(lay.interreflection);
+        let k = q + usize::from(lay.gathered);
+        LocalColumns { g, kappa, q, k }
     }
 }
 
@@ -402,7 +419,7 @@ pub(crate) fn normal_equations(
                         p,
                         f,
                         c,
-                        &wanted,
+                        (&want, &wanted),
                         scratch,
                         &mut hl[c * n * n..(c + 1) * n * n],
                         &mut gl[c * n..(c + 1) * n],
@@ -430,10 +447,6 @@ pub(crate) fn normal_equations(
     }
     (hm, grad, total.max(0.0))
 }
-
-/// Most parameters one frame and channel's coefficients depend on (rho and s of degree 9,
-/// every optional term).
-const MAX_LOCAL: usize = 24;
 
 /// Parameters one frame and channel's coefficients depend on.
 fn local_len(lay: &Layout) -> usize {
@@ -488,7 +501,8 @@ impl LocalScratch {
 
 /// Frame f, channel c's share of the normal equations: its block of `J^T G J` into `hl`
 /// (row-major, over [`local_indices`]) and of `J^T (G y - h)` into `gl`, the rows and columns
-/// `wanted` only (the others are left 0); returns its cost.
+/// `wanted` only (`want[col]`: whether column col is among them; the others are left 0);
+/// returns its cost.
 #[allow(clippy::too_many_arguments)]
 fn local_terms(
     lay: &Layout,
@@ -496,7 +510,7 @@ fn local_terms(
     p: &[f64],
     f: usize,
     c: usize,
-    wanted: &[usize],
+    (want, wanted): (&[bool], &[usize]),
     scratch: &mut LocalScratch,
     hl: &mut [f64],
     gl: &mut [f64],
@@ -517,13 +531,12 @@ fn local_terms(
     // Local Jacobian dy/dparams, columns in [`local_indices`]' order. It is sparse (each
     // coefficient of y depends on a few parameters), so it is kept as (row, column, value)
     // entries.
-    let col_g = lay.nr + lay.ns - 1;
-    let mut next = col_g + 1 + usize::from(lay.ambient);
-    let col_kappa = next;
-    next += usize::from(lay.interreflection);
-    let col_q = next;
-    next += usize::from(lay.gathered);
-    let col_k = next;
+    let LocalColumns {
+        g: col_g,
+        kappa: col_kappa,
+        q: col_q,
+        k: col_k,
+    } = LocalColumns::of(lay);
     jac.clear();
     let rho = &p[lay.c_off(c)..lay.c_off(c) + lay.nr];
     for j in 0..lay.nr {
@@ -560,10 +573,6 @@ fn local_terms(
         }
     }
     let n = gl.len();
-    let mut want = [false; MAX_LOCAL];
-    for &b in wanted {
-        want[b] = true;
-    }
     // G J (d1 x n, column-major), the wanted columns. G is symmetric, so its column `row`
     // (contiguous in nalgebra's column-major storage) is its row `row`.
     gj.fill(0.0);
