@@ -24,6 +24,14 @@ where
     parts.into_iter().fold(zero, add)
 }
 
+/// Per-channel sums and a weight sum, the partial result of a weighted RMS over samples.
+pub type ChannelSums = ([f64; 3], f64);
+
+/// [`ordered_block_sum`]'s `add` for [`ChannelSums`].
+pub fn add_channel_sums((a, wa): ChannelSums, (b, wb): ChannelSums) -> ChannelSums {
+    ([a[0] + b[0], a[1] + b[1], a[2] + b[2]], wa + wb)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -8,7 +8,7 @@ use super::fit::CalibratedOptions;
 use super::moments::Layout;
 use super::samples::PooledSamples;
 use super::specular::lobe;
-use crate::parallel::ordered_block_sum;
+use crate::parallel::{add_channel_sums, ordered_block_sum};
 use crate::shading::bernstein::bernstein_eval;
 use rayon::prelude::*;
 
@@ -127,7 +127,7 @@ pub(super) fn residual_rms(
             }
             (acc, ws)
         },
-        |(a, wa), (b, wb)| ([a[0] + b[0], a[1] + b[1], a[2] + b[2]], wa + wb),
+        add_channel_sums,
     );
     (
         std::array::from_fn(|c| (sums[c] / ws.max(1e-300)).sqrt()),

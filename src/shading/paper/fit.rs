@@ -19,7 +19,7 @@
 
 use super::moments::{accumulate, Quadratic};
 use super::psi::PsiModel;
-use crate::parallel::ordered_block_sum;
+use crate::parallel::{add_channel_sums, ordered_block_sum};
 use crate::shading::bernstein::eval3;
 use crate::shading::error::check_weights;
 use crate::shading::robust::Robust;
@@ -175,7 +175,7 @@ pub fn fit_psi(samples: &SampleSet, weights: &[f32], opts: &FitOptions) -> Resul
             }
             (acc, ws)
         },
-        |(a, wa), (b, wb)| ([a[0] + b[0], a[1] + b[1], a[2] + b[2]], wa + wb),
+        add_channel_sums,
     );
     for ch in 0..3 {
         reports[ch].cost = sums[ch];
