@@ -59,7 +59,8 @@ impl Frame {
         }
         let x = x.clamp(0.0, w - 1.0);
         let y = y.clamp(0.0, h - 1.0);
-        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+        // Clamped to >= 0: truncation is floor.
+        let (x0, y0) = (x as usize, y as usize);
         let x1 = (x0 + 1).min(self.width as usize - 1);
         let y1 = (y0 + 1).min(self.height as usize - 1);
         let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);

@@ -137,7 +137,8 @@ impl MipTexture {
         } else {
             lod.clamp(0.0, top)
         };
-        let l0 = lod.floor() as usize;
+        // lod >= 0: truncation is floor.
+        let l0 = lod as usize;
         let f = lod - l0 as f32;
         let a = self.bilinear(l0, u, v);
         if f <= 0.0 || l0 + 1 >= self.levels.len() {

@@ -63,9 +63,25 @@ pub fn basis_into(t: f64, out: &mut [f64]) {
 /// for degrees up to 15).
 #[inline]
 pub fn bernstein_eval(coeffs: &[f64], t: f64) -> f64 {
+    // The light's polynomials are evaluated per pixel and per texel: the common lengths get
+    // a fully unrolled copy (the same operations in the same order, so the same values).
+    match coeffs.len() {
+        1 => coeffs[0],
+        2 => casteljau::<2>(coeffs, t),
+        3 => casteljau::<3>(coeffs, t),
+        4 => casteljau::<4>(coeffs, t),
+        5 => casteljau::<5>(coeffs, t),
+        6 => casteljau::<6>(coeffs, t),
+        _ => casteljau::<16>(coeffs, t),
+    }
+}
+
+/// de Casteljau on the first `coeffs.len() <= N` entries of an `N`-array.
+#[inline(always)]
+fn casteljau<const N: usize>(coeffs: &[f64], t: f64) -> f64 {
     let n = coeffs.len();
-    debug_assert!((1..=16).contains(&n));
-    let mut b = [0.0f64; 16];
+    debug_assert!((1..=N).contains(&n));
+    let mut b = [0.0f64; N];
     b[..n].copy_from_slice(coeffs);
     for k in (1..n).rev() {
         for i in 0..k {

@@ -321,8 +321,9 @@ impl<'a> FrameCtx<'a> {
         if !(u >= 0.0 && u <= wm && vv >= 0.0 && vv <= hm) {
             return None;
         }
-        let x0 = (u.floor() as usize).min(self.width - 2);
-        let y0 = (vv.floor() as usize).min(self.height - 2);
+        // u, vv >= 0: truncation is floor, without a libm call.
+        let x0 = (u as usize).min(self.width - 2);
+        let y0 = (vv as usize).min(self.height - 2);
         let (fx, fy) = ((u - x0 as f64) as f32, (vv - y0 as f64) as f32);
         let i00 = y0 * self.width + x0;
         let idx = [i00, i00 + 1, i00 + self.width, i00 + self.width + 1];
