@@ -251,6 +251,7 @@ impl LevelProblem<'_> {
             sum_sq: 0.0,
         };
         let pinhole = cam.is_pinhole();
+        let mut normal = NormalSums::default();
         for (i, (q, inv_sigma)) in self.points.iter().zip(&self.inv_sigma).enumerate() {
             let reference = self.ref_cost.get(i).map(|&c| f64::from(c));
             if reference.is_some_and(f64::is_nan) {
@@ -303,11 +304,42 @@ impl LevelProblem<'_> {
                 }
                 j[6] = -m;
                 j *= w_sigma;
-                out.h.ger(w, &j, &j, 1.0);
-                out.b.axpy(w * e, &j, 1.0);
+                normal.add(w, e, &j);
             }
         }
+        if with_normal_equations {
+            (out.h, out.b) = normal.finish();
+        }
         out
+    }
+}
+
+/// Running sums of the weighted normal equations `J^T W J` and `J^T W e`, the matrix's upper
+/// triangle only (it is symmetric: 28 products per residual instead of 49).
+#[derive(Default)]
+struct NormalSums {
+    h: [[f64; 7]; 7],
+    b: [f64; 7],
+}
+
+impl NormalSums {
+    /// Add one residual `e` with IRLS weight `w` and Jacobian row `j`.
+    #[inline(always)]
+    fn add(&mut self, w: f64, e: f64, j: &Vec7) {
+        let j: [f64; 7] = (*j).into();
+        for a in 0..7 {
+            let wj = w * j[a];
+            for b in a..7 {
+                self.h[a][b] += wj * j[b];
+            }
+            self.b[a] += w * e * j[a];
+        }
+    }
+
+    /// The full matrix and the vector.
+    fn finish(&self) -> (Mat7, Vec7) {
+        let h = Mat7::from_fn(|r, c| self.h[r.min(c)][r.max(c)]);
+        (h, Vec7::from(self.b))
     }
 }
 
