@@ -72,6 +72,10 @@ pub struct RegistrationOptions {
     /// A level ends when failed renders have shrunk the trust region below this fraction of
     /// its starting size.
     pub min_radius: f64,
+    /// After a failed render the trust region becomes half the step that failed (the usual
+    /// trust-region rule) instead of half the region: a step well inside the region is
+    /// otherwise tried again almost unchanged (only the damping grows), a render each time.
+    pub shrink_to_failed_step: bool,
 }
 
 impl Default for RegistrationOptions {
@@ -105,6 +109,7 @@ impl Default for RegistrationOptions {
             min_points: 100,
             step_tolerance: 2e-3,
             min_radius: 1.0 / 32.0,
+            shrink_to_failed_step: false,
         }
     }
 }

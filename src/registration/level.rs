@@ -133,10 +133,14 @@ impl FrameRegistrar<'_> {
         st.converged = false;
         for _ in 0..o.max_renders.max(1) {
             let region = (base.0 * radius, base.1 * radius);
-            let (pose, log_k, steps, small) = if o.max_inner == 0 {
-                single_step(&cur, region, lambda, tol, o.estimate_gain)
+            let (pose, log_k, steps, small, reach) = if o.max_inner == 0 {
+                let (pose, log_k, steps, small, used) =
+                    single_step(&cur, region, lambda, tol, o.estimate_gain);
+                (pose, log_k, steps, small, radius * used)
             } else {
-                inner_steps(&cur, region, o.max_inner, tol, o.estimate_gain)
+                let (pose, log_k, steps, small) =
+                    inner_steps(&cur, region, o.max_inner, tol, o.estimate_gain);
+                (pose, log_k, steps, small, radius)
             };
             st.iterations += steps;
             // A step under the tolerance is not worth a render.
@@ -147,7 +151,12 @@ impl FrameRegistrar<'_> {
             let next = match self.snapshot(pyr, level, &pose, log_k, floor) {
                 Ok(n) if n.mean_cost < cur.mean_cost => n,
                 _ => {
-                    radius *= 0.5;
+                    radius = 0.5
+                        * if o.shrink_to_failed_step {
+                            reach
+                        } else {
+                            radius
+                        };
                     lambda *= 4.0;
                     if radius < o.min_radius {
                         st.converged = true;
@@ -172,26 +181,26 @@ impl FrameRegistrar<'_> {
 }
 
 /// One damped Gauss–Newton step from `cur`, kept within `radius` (mm, radians), to be
-/// verified by a new render. Returns the pose, log gain, 1 and whether the step was under the
-/// tolerance.
+/// verified by a new render. Returns the pose, log gain, 1, whether the step was under the
+/// tolerance and the fraction of `radius` the step used (its larger part).
 fn single_step(
     cur: &Snapshot,
     radius: (f64, f64),
     lambda: f64,
     tol: f64,
     with_gain: bool,
-) -> (Affine, f64, usize, bool) {
+) -> (Affine, f64, usize, bool, f64) {
     let Some(step) = solve(&cur.lin, lambda, with_gain) else {
-        return (cur.pose, cur.log_k, 0, true);
+        return (cur.pose, cur.log_k, 0, true, 0.0);
     };
-    let (xi, dk, size) = within_radius(step, radius);
-    (perturb(&cur.pose, &xi), cur.log_k + dk, 1, size < tol)
+    let (xi, dk, size, used) = within_radius(step, radius);
+    (perturb(&cur.pose, &xi), cur.log_k + dk, 1, size < tol, used)
 }
 
 /// A solver step scaled down to stay within `radius` (mm, radians): the camera-frame pose step,
-/// the log-gain step, and the step's size (translation mm, or rotation radians x 100 mm,
-/// whichever is larger) for the convergence test.
-fn within_radius(mut step: Vec7, radius: (f64, f64)) -> ([f64; 6], f64, f64) {
+/// the log-gain step, the step's size (translation mm, or rotation radians x 100 mm,
+/// whichever is larger) for the convergence test, and the fraction of `radius` it uses.
+fn within_radius(mut step: Vec7, radius: (f64, f64)) -> ([f64; 6], f64, f64, f64) {
     let t = (step[0] * step[0] + step[1] * step[1] + step[2] * step[2]).sqrt();
     let r = (step[3] * step[3] + step[4] * step[4] + step[5] * step[5]).sqrt();
     let shrink = (radius.0 / t.max(1e-300))
@@ -199,7 +208,13 @@ fn within_radius(mut step: Vec7, radius: (f64, f64)) -> ([f64; 6], f64, f64) {
         .min(1.0);
     step *= shrink;
     let xi = [step[0], step[1], step[2], step[3], step[4], step[5]];
-    (xi, step[6], (shrink * t).max(shrink * r * 1e2))
+    let used = (shrink * t / radius.0.max(1e-300)).max(shrink * r / radius.1.max(1e-300));
+    (
+        xi,
+        step[6],
+        (shrink * t).max(shrink * r * 1e2),
+        used.min(1.0),
+    )
 }
 
 /// Levenberg–Marquardt on `cur`'s fixed points, the motion from `cur.pose` kept within
@@ -221,7 +236,7 @@ fn inner_steps(
             break;
         };
         steps += 1;
-        let (xi, dk, size) = within_radius(step, radius);
+        let (xi, dk, size, _) = within_radius(step, radius);
         let cand = perturb(&pose, &xi);
         let cand_k = log_k + dk;
         let trial = cur.prob.evaluate(&cand, cand_k, false);

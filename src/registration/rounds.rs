@@ -61,6 +61,9 @@ pub struct RoundOptions {
     /// A texture round's smallest trust region before a level ends (the frame options' own
     /// when larger).
     pub texture_min_radius: f64,
+    /// A texture round's trust region shrinks to half the step that failed
+    /// ([`RegistrationOptions::shrink_to_failed_step`]).
+    pub texture_shrink_to_failed_step: bool,
 }
 
 impl Default for RoundOptions {
@@ -90,6 +93,7 @@ impl Default for RoundOptions {
             // 4 deg with every round loosened: mean roll error -0.78 deg, 28.62 dB).
             texture_step_tolerance: 0.01,
             texture_min_radius: 0.5,
+            texture_shrink_to_failed_step: true,
         }
     }
 }
@@ -109,6 +113,7 @@ pub fn register_round(
     if kind == RoundKind::Texture {
         frame_opts.step_tolerance = frame_opts.step_tolerance.max(opts.texture_step_tolerance);
         frame_opts.min_radius = frame_opts.min_radius.max(opts.texture_min_radius);
+        frame_opts.shrink_to_failed_step = opts.texture_shrink_to_failed_step;
     } else {
         frame_opts.uniform_albedo_from_level = 0;
         frame_opts.uniform_channel_weights = opts.geometry_channel_weights;
