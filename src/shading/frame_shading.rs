@@ -95,6 +95,65 @@ impl FrameShading<'_> {
         std::array::from_fn(|c| gain * g.k[c] * f64::from(e[c]))
     }
 
+    /// A distance (mm) beyond which every surface point's [`Shade::luminance`] (with the
+    /// gathered inter-reflection of [`FrameShading::indirect_scale`]) is below `luminance`,
+    /// at any gamma in [0, 1] and any angle off the axis: de-lighting can drop what lies
+    /// farther without evaluating it. Infinity when the model gives no such bound (the
+    /// paper's Psi is a polynomial in z, not a falling function of it).
+    pub fn dimmer_than_beyond(&self, luminance: f64) -> f64 {
+        let FrameShading::Calibrated { model, frame } = self else {
+            return f64::INFINITY;
+        };
+        let gain = model.gains.get(*frame).copied().unwrap_or(f64::NAN);
+        if !(luminance > 0.0 && gain > 0.0 && gain.is_finite()) {
+            return f64::INFINITY;
+        }
+        // A Bernstein polynomial on [0, 1] lies within its coefficients' range.
+        let range = |c: &[f64]| {
+            c.iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+                    (lo.min(x), hi.max(x))
+                })
+        };
+        let (s_lo, s_hi) = range(&model.s);
+        let (r_lo, r_hi) = (0..3).fold((0.0, 0.0), |(lo, hi), c| {
+            let (a, b) = range(&model.rho[c]);
+            (lo + LUMA[c] * a, hi + LUMA[c] * b)
+        });
+        // Largest luminance of g s(theta) rho(gamma) at 1 mm: falls as 1 / z^2.
+        let direct = [s_lo * r_lo, s_lo * r_hi, s_hi * r_lo, s_hi * r_hi]
+            .into_iter()
+            .fold(0.0f64, f64::max)
+            * gain;
+        // The gathered term interpolates its field's nodes: within their range.
+        let indirect = match (&model.gathered, &model.frame_indirect) {
+            (Some(g), Some(fields)) => match fields.get(*frame) {
+                Some(field) => (0..3)
+                    .map(|c| {
+                        let (lo, hi) = field
+                            .values
+                            .iter()
+                            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                                (lo.min(f64::from(v[c])), hi.max(f64::from(v[c])))
+                            });
+                        LUMA[c] * (gain * g.k[c] * lo).max(gain * g.k[c] * hi)
+                    })
+                    .sum::<f64>(),
+                None => 0.0,
+            },
+            _ => 0.0,
+        };
+        if !(direct.is_finite() && indirect.is_finite()) {
+            return f64::INFINITY;
+        }
+        // A relative margin far above the rounding of the shading's evaluation.
+        let room = luminance * (1.0 - 1e-6) - indirect.max(0.0) * (1.0 + 1e-6);
+        if !(room > 0.0) {
+            return f64::INFINITY;
+        }
+        (direct * (1.0 + 1e-6) / room).sqrt()
+    }
+
     /// Check the model's numbers; the message says what is wrong.
     pub fn validate(&self) -> Result<(), String> {
         match self {
@@ -196,5 +255,76 @@ mod tests {
             frame: 5,
         };
         assert!(missing.validate().unwrap_err().contains("frame 5"));
+    }
+
+    /// Beyond the distance, no gamma, angle or image position gives the luminance; well
+    /// short of it some point does (a bound that is safe and not loose: the green rho here
+    /// peaks at 0.8 between coefficients up to 1.4).
+    #[test]
+    fn nothing_beyond_the_dim_distance_reaches_the_luminance() {
+        use crate::shading::indirect::{GatheredInterreflection, IndirectField};
+        use std::sync::Arc;
+        let m = CalibratedModel {
+            gains: vec![1.5, 3.0],
+            gathered: Some(GatheredInterreflection {
+                k: [0.5, 0.4, 0.3],
+                nodes_across: 2,
+                rays: 8,
+                visibility: false,
+            }),
+            frame_indirect: Some(Arc::new(vec![
+                IndirectField {
+                    nx: 1,
+                    ny: 1,
+                    values: vec![[0.0; 3]],
+                },
+                IndirectField {
+                    nx: 2,
+                    ny: 2,
+                    values: vec![[1e-4, 2e-4, 0.0], [3e-4, 1e-4, 1e-4], [0.0; 3], [2e-4; 3]],
+                },
+            ])),
+            // rho peaks inside (0, 1) for green; s falls off the axis.
+            ..CalibratedModel::new(
+                [
+                    vec![0.2, 1.0, 0.6],
+                    vec![0.1, 1.4, 0.3],
+                    vec![0.05, 0.2, 0.4],
+                ],
+                vec![1.0, 0.8, 0.3, 0.1],
+                0.4,
+            )
+        };
+        let f = FrameShading::Calibrated {
+            model: &m,
+            frame: 1,
+        };
+        let lum = 0.02;
+        let d = f.dimmer_than_beyond(lum);
+        assert!(d.is_finite() && d > 1.0, "{d}");
+        let brightest = |z: f64| {
+            let mut best = 0.0f64;
+            for i in 0..=40 {
+                for j in 0..=10 {
+                    for (u, v) in [(0.0, 0.0), (0.3, 0.8), (1.0, 0.0), (0.5, 0.5)] {
+                        let mut sh = f.shade(i as f64 / 40.0, z, 1.0 - 0.06 * j as f64);
+                        for (s, e) in sh.scale.iter_mut().zip(f.indirect_scale(u, v)) {
+                            *s += e;
+                        }
+                        best = best.max(sh.luminance());
+                    }
+                }
+            }
+            best
+        };
+        assert!(brightest(d * 1.000001) < lum);
+        assert!(brightest(d * 0.6) > lum, "{}", brightest(d * 0.6));
+        // The paper's Psi and a frame without a gain give no bound.
+        let none = FrameShading::Calibrated {
+            model: &m,
+            frame: 7,
+        };
+        assert_eq!(none.dimmer_than_beyond(lum), f64::INFINITY);
+        assert_eq!(f.dimmer_than_beyond(0.0), f64::INFINITY);
     }
 }

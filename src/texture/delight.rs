@@ -161,6 +161,9 @@ pub(crate) struct FrameCtx<'a> {
     rgb: &'a [f32],
     depth: &'a [f32],
     depth_max: f64,
+    /// Farther than this (mm) the shading is below `min_weight` wherever the point is seen
+    /// ([`FrameShading::dimmer_than_beyond`]).
+    too_dim_beyond: f64,
     shading: FrameShading<'a>,
     min_gamma: f64,
     sat: f32,
@@ -232,6 +235,7 @@ impl<'a> FrameCtx<'a> {
             * obs
                 .shading
                 .peak_luminance(min_gamma, depth_min as f64, depth_max);
+        let too_dim_beyond = obs.shading.dimmer_than_beyond(min_weight);
         Ok(FrameCtx {
             rot,
             trans,
@@ -244,6 +248,7 @@ impl<'a> FrameCtx<'a> {
             rgb: &obs.frame.rgb,
             depth: obs.depth,
             depth_max,
+            too_dim_beyond,
             shading: obs.shading,
             min_gamma,
             sat: opts.saturation_level,
@@ -281,7 +286,9 @@ impl<'a> FrameCtx<'a> {
         if pc[2] + r <= 0.0 {
             return false;
         }
-        if dist - r - self.max_tolerance(dist + r) > self.depth_max {
+        if dist - r - self.max_tolerance(dist + r) > self.depth_max
+            || dist - r > self.too_dim_beyond
+        {
             return false;
         }
         let angle = (pc[2] / dist).clamp(-1.0, 1.0).acos();
@@ -299,7 +306,7 @@ impl<'a> FrameCtx<'a> {
             return None;
         }
         let d = (pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2]).sqrt();
-        if pc[2] < self.cos_max * d {
+        if pc[2] < self.cos_max * d || d > self.too_dim_beyond {
             return None;
         }
         let v = [0, 1, 2].map(|k| self.centre[k] - pw[k]);
