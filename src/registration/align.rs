@@ -329,8 +329,8 @@ impl NormalSums {
         let j: [f64; 7] = (*j).into();
         for a in 0..7 {
             let wj = w * j[a];
-            for b in a..7 {
-                self.h[a][b] += wj * j[b];
+            for (h, &jb) in self.h[a][a..].iter_mut().zip(&j[a..]) {
+                *h += wj * jb;
             }
             self.b[a] += w * e * j[a];
         }

@@ -148,7 +148,7 @@ impl FrameShading<'_> {
         }
         // A relative margin far above the rounding of the shading's evaluation.
         let room = luminance * (1.0 - 1e-6) - indirect.max(0.0) * (1.0 + 1e-6);
-        if !(room > 0.0) {
+        if room.is_nan() || room <= 0.0 {
             return f64::INFINITY;
         }
         (direct * (1.0 + 1e-6) / room).sqrt()
