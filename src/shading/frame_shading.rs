@@ -108,16 +108,15 @@ impl FrameShading<'_> {
         if !(luminance > 0.0 && gain > 0.0 && gain.is_finite()) {
             return f64::INFINITY;
         }
-        // A Bernstein polynomial on [0, 1] lies within its coefficients' range.
-        let range = |c: &[f64]| {
-            c.iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
-                    (lo.min(x), hi.max(x))
-                })
+        let range = |values: &mut dyn Iterator<Item = f64>| {
+            values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+                (lo.min(x), hi.max(x))
+            })
         };
-        let (s_lo, s_hi) = range(&model.s);
+        // A Bernstein polynomial on [0, 1] lies within its coefficients' range.
+        let (s_lo, s_hi) = range(&mut model.s.iter().copied());
         let (r_lo, r_hi) = (0..3).fold((0.0, 0.0), |(lo, hi), c| {
-            let (a, b) = range(&model.rho[c]);
+            let (a, b) = range(&mut model.rho[c].iter().copied());
             (lo + LUMA[c] * a, hi + LUMA[c] * b)
         });
         // Largest luminance of g s(theta) rho(gamma) at 1 mm: falls as 1 / z^2.
@@ -130,12 +129,7 @@ impl FrameShading<'_> {
             (Some(g), Some(fields)) => match fields.get(*frame) {
                 Some(field) => (0..3)
                     .map(|c| {
-                        let (lo, hi) = field
-                            .values
-                            .iter()
-                            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-                                (lo.min(f64::from(v[c])), hi.max(f64::from(v[c])))
-                            });
+                        let (lo, hi) = range(&mut field.values.iter().map(|v| f64::from(v[c])));
                         LUMA[c] * (gain * g.k[c] * lo).max(gain * g.k[c] * hi)
                     })
                     .sum::<f64>(),
