@@ -236,3 +236,36 @@ fn phantom_from_a_real_mask() {
     let dz = poses[0].pose.centre().z - poses[poses.len() - 1].pose.centre().z;
     assert!(dz > 60.0, "descent {dz} mm");
 }
+
+/// `--trachea-posterior-wall` shapes the built-in tree only, and only within a radius: both
+/// misuses are refused before anything is written.
+#[test]
+fn a_posterior_wall_out_of_range_or_with_a_mask_anatomy_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("case");
+    let run = |extra: &[&str]| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_bronchosim"))
+            .args(["phantom", "--out", out.to_str().unwrap()])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(!o.status.success());
+        String::from_utf8_lossy(&o.stderr).into_owned()
+    };
+    let e = run(&["--trachea-posterior-wall", "1.5"]);
+    assert!(
+        e.contains("--trachea-posterior-wall 1.5") && e.contains("0.2 to 1"),
+        "{e}"
+    );
+    let e = run(&[
+        "--trachea-posterior-wall",
+        "0.7",
+        "--anatomy",
+        "mask.nii.gz",
+    ]);
+    assert!(
+        e.contains("mask.nii.gz") && e.contains("own trachea"),
+        "{e}"
+    );
+    assert!(!out.exists());
+}

@@ -35,6 +35,11 @@ pub struct TreeOptions {
     pub ring_period_mm: f64,
     /// Width of the smooth-min fillet at junctions (mm).
     pub junction_smoothing_mm: f64,
+    /// The trachea's posterior (membranous) wall, where the C-shaped cartilage rings are
+    /// open: a flat wall this fraction of the radius behind the axis (`None`: a round
+    /// trachea). A round straight tube lets the camera turn about its axis without changing
+    /// what it sees, so only the far carina fixes the video's roll there.
+    pub trachea_posterior_wall: Option<f64>,
 }
 
 impl Default for TreeOptions {
@@ -47,6 +52,7 @@ impl Default for TreeOptions {
             ring_amplitude_mm: 0.3,
             ring_period_mm: 4.0,
             junction_smoothing_mm: 1.5,
+            trachea_posterior_wall: None,
         }
     }
 }
@@ -112,6 +118,7 @@ struct Spec {
     r0: f64,
     r1: f64,
     ring: f64,
+    posterior_wall: Option<f64>,
     split_axis: Vector3<f64>,
 }
 
@@ -147,6 +154,7 @@ impl AirwayTree {
             r0: opts.trachea_radius_mm,
             r1: opts.trachea_radius_mm * 0.94,
             ring: opts.ring_amplitude_mm,
+            posterior_wall: opts.trachea_posterior_wall,
             split_axis: RIGHT,
         }];
         let mut built: Vec<Branch> = Vec::new();
@@ -205,6 +213,7 @@ impl AirwayTree {
                         r0,
                         r1: r0 * 0.85,
                         ring,
+                        posterior_wall: None,
                         split_axis: next_axis,
                     });
                 }
@@ -348,6 +357,7 @@ fn make_branch(id: usize, s: &Spec, ring_period: f64) -> Branch {
         radius_end_mm: s.r1,
         ring_amplitude_mm: s.ring,
         ring_period_mm: ring_period,
+        posterior_wall: s.posterior_wall,
         bbox_lo: Point3::origin(),
         bbox_hi: Point3::origin(),
     };
@@ -422,5 +432,40 @@ mod tests {
         let p = mid + Vector3::new(3.0, 0.0, 0.0);
         let d = t.lumen_sdf(p);
         assert!((d - (3.0 - tr.radius_at(s))).abs() < 0.05, "{d}");
+    }
+
+    #[test]
+    fn a_posterior_wall_flattens_the_back_of_the_trachea_alone() {
+        let opts = |wall| TreeOptions {
+            ring_amplitude_mm: 0.0,
+            trachea_posterior_wall: wall,
+            ..Default::default()
+        };
+        let (round, flat) = (
+            AirwayTree::new(&opts(None)),
+            AirwayTree::new(&opts(Some(0.7))),
+        );
+        let tr = &flat.branches[0];
+        let k = tr.centreline.len() / 3;
+        let (mid, axis) = (tr.centreline[k], tr.centreline[k + 1] - tr.centreline[k]);
+        let r = tr.radius_at(tr.arc_mm[k]);
+        let back = Vector3::new(0.0, -1.0, 0.0);
+        let back = (back - axis * back.dot(&axis) / axis.norm_squared()).normalize();
+        // The back wall is 0.7 r behind the axis; the front and the sides are where they were.
+        let on_back = flat.lumen_sdf(mid + back * (0.7 * r));
+        assert!(on_back.abs() < 0.05, "{on_back}");
+        let behind = flat.lumen_sdf(mid + back * (0.9 * r));
+        assert!((behind - 0.2 * r).abs() < 0.05, "{behind}");
+        for dir in [-back, back.cross(&axis.normalize())] {
+            let (a, b) = (
+                round.lumen_sdf(mid + dir * r),
+                flat.lumen_sdf(mid + dir * r),
+            );
+            assert!(a.abs() < 0.05 && (a - b).abs() < 1e-9, "{a} {b}");
+        }
+        // The bronchi stay round.
+        let main = &flat.branches[1];
+        let m = main.centreline[main.centreline.len() / 2];
+        assert_eq!(flat.lumen_sdf(m), round.lumen_sdf(m));
     }
 }

@@ -1,7 +1,7 @@
 //! [`Branch`]: one airway branch of the phantom — a tapered tube around a cubic Bézier
 //! centreline, with the cartilage-ring relief — and its signed distance.
 
-use crate::math::Point3;
+use crate::math::{Point3, Vector3};
 
 /// One airway branch: a tapered tube around a cubic Bézier centreline.
 #[derive(Clone, Debug)]
@@ -28,6 +28,9 @@ pub struct Branch {
     pub ring_amplitude_mm: f64,
     /// Period of the cartilage rings along the centreline (mm).
     pub ring_period_mm: f64,
+    /// A flat posterior (world -y) wall this fraction of the radius behind the centreline
+    /// (the trachea's membranous wall); `None`: round.
+    pub posterior_wall: Option<f64>,
     pub(super) bbox_lo: Point3<f64>,
     pub(super) bbox_hi: Point3<f64>,
 }
@@ -38,11 +41,16 @@ impl Branch {
         *self.arc_mm.last().unwrap_or(&0.0)
     }
 
+    /// Lumen radius (mm) at arc length `s` (mm) from the start, without the ring relief.
+    fn base_radius_at(&self, s: f64) -> f64 {
+        let t = (s / self.length_mm().max(1e-9)).clamp(0.0, 1.0);
+        self.radius_start_mm + (self.radius_end_mm - self.radius_start_mm) * t
+    }
+
     /// Lumen radius (mm) at arc length `s` (mm) from the start.
     pub fn radius_at(&self, s: f64) -> f64 {
         let len = self.length_mm().max(1e-9);
-        let t = (s / len).clamp(0.0, 1.0);
-        let base = self.radius_start_mm + (self.radius_end_mm - self.radius_start_mm) * t;
+        let base = self.base_radius_at(s);
         if self.ring_amplitude_mm == 0.0 {
             return base;
         }
@@ -71,9 +79,17 @@ impl Branch {
             } else {
                 0.0
             };
-            let d = (p - (a + ab * t)).norm();
+            let c = a + ab * t;
             let s = self.arc_mm[i] + t * (self.arc_mm[i + 1] - self.arc_mm[i]);
-            let v = d - self.radius_at(s);
+            let mut v = (p - c).norm() - self.radius_at(s);
+            if let Some(wall) = self.posterior_wall {
+                // The tube cut by the plane of the back wall (the larger of the two distances:
+                // their intersection).
+                let axis = ab / l2.sqrt().max(1e-12);
+                let back = Vector3::new(0.0, -1.0, 0.0);
+                let back = (back - axis * back.dot(&axis)).normalize();
+                v = v.max((p - c).dot(&back) - wall * self.base_radius_at(s));
+            }
             if v < best {
                 best = v;
             }

@@ -333,6 +333,11 @@ pub struct PhantomArgs {
     /// Average blocks of N³ mask voxels first (with --anatomy; faster, coarser).
     #[arg(long, default_value_t = PhantomOptions::default().mask.downsample)]
     pub downsample: usize,
+    /// Flatten the built-in trachea's back (its membranous wall, where the cartilage rings
+    /// are open) to a plane FRACTION of the radius behind its axis, as in a real trachea
+    /// (e.g. 0.7; default: round).
+    #[arg(long, value_name = "FRACTION")]
+    pub trachea_posterior_wall: Option<f64>,
     /// Sub-samples per pixel along each axis (antialiasing).
     #[arg(long, default_value_t = PhantomOptions::default().supersample)]
     pub supersample: u32,

@@ -209,6 +209,16 @@ fn phantom(a: PhantomArgs, quiet: bool) -> anyhow::Result<String> {
             a.motion_blur_share
         );
     }
+    match (a.trachea_posterior_wall, &a.anatomy) {
+        (Some(_), Some(mask)) => anyhow::bail!(
+            "--trachea-posterior-wall shapes the built-in tree; {} has its own trachea",
+            mask.display()
+        ),
+        (Some(f), None) if !(0.2..=1.0).contains(&f) => anyhow::bail!(
+            "--trachea-posterior-wall {f}: expected a fraction of the radius from 0.2 to 1"
+        ),
+        _ => {}
+    }
     let albedo_sampling = match a.baked_albedo_mm {
         None => None,
         Some(0.0) => Some(AlbedoSampling::Procedural),
@@ -231,6 +241,7 @@ fn phantom(a: PhantomArgs, quiet: bool) -> anyhow::Result<String> {
     };
     (opts.width, opts.height) = a.size.unwrap_or((opts.width, opts.height));
     opts.mask.downsample = a.downsample;
+    opts.ct.tree.trachea_posterior_wall = a.trachea_posterior_wall;
     opts.motion_blur.share = a.motion_blur_share;
     let t = std::time::Instant::now();
     let summary = write_phantom_case(&a.out, &opts)

@@ -106,6 +106,7 @@ pub(super) fn write_manifest(
         "generator": "bronchosim phantom",
         "seed": opts.seed,
         "anatomy": opts.anatomy.as_ref().map(|p| p.display().to_string()),
+        "trachea_posterior_wall": opts.ct.tree.trachea_posterior_wall,
         "frames": sm.frames,
         "size": [opts.width, opts.height],
         "supersample": opts.supersample,
