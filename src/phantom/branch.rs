@@ -1,5 +1,6 @@
 //! [`Branch`]: one airway branch of the phantom — a tapered tube around a cubic Bézier
-//! centreline, with the cartilage-ring relief — and its signed distance.
+//! centreline, with the cartilage-ring relief and optionally a flat back wall — and its signed
+//! distance.
 
 use crate::math::{Point3, Vector3};
 
