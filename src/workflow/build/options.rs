@@ -94,6 +94,13 @@ pub struct BuildOptions {
     /// of its frames are outliers, their corrections departing from their neighbours': the
     /// texture fused after it would follow their errors (1 or more: never).
     pub registration_geometry_repeat_share: f64,
+    /// A round on which fewer than this share of the frames converge has failed: its poses
+    /// are discarded and the rounds stop. The video's drift fitted to the few frames that did
+    /// converge would otherwise move all the others: from a real airway's tracker poses 3 mm /
+    /// 4 deg off (ATM_224, 30 frames), the first geometry round converged on 4 frames, moved
+    /// every frame about 4 mm, and the build ended 4.08 mm / 15.7 deg from the truth against
+    /// 2.76 mm / 4.06 deg given (BENCHMARKS.md, session 24).
+    pub registration_min_converged_share: f64,
     /// The refined poses are kept only when they predict held-out frames better than the given
     /// ones by more than this (dB). Each held-out frame's refined pose was registered against
     /// a texture it helped fuse, and a model fused at poses the registration made consistent
@@ -205,6 +212,7 @@ impl Default for BuildOptions {
             // leaves 37 of 80 frames outliers, a second one 8; from 1.5 mm / 2 deg 10, and a
             // second round there was no better (BENCHMARKS.md, issue 16, session 12).
             registration_geometry_repeat_share: 0.25,
+            registration_min_converged_share: 0.25,
             registration_keep_margin_db: 1.0,
             registration_tolerance_mm: 0.05,
             registration_light_refinements: 0,
