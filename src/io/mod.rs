@@ -17,4 +17,5 @@ pub mod output_dir;
 pub mod paths;
 pub mod png;
 pub mod poses;
+pub mod scope_light;
 pub mod video;

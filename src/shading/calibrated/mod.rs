@@ -5,7 +5,8 @@
 //! [`density_weights_3d`] weighs them over (gamma, z, theta), [`fit_calibrated`] fits rho, s,
 //! the gains and the inter-reflection on the pool; [`refit_with_chroma_albedo`] refits them with
 //! each pixel's albedo predicted from its colour, and [`fit_calibrated_with_albedo`] with a
-//! known albedo (the build's refinements against a fused texture). [`plots`] draws the light.
+//! known albedo (the build's refinements against a fused texture). [`with_video_gains`] carries
+//! another model's light (the same scope) to this video. [`plots`] draws the light.
 
 pub mod chroma_albedo;
 pub mod exposure;
@@ -16,6 +17,7 @@ pub mod plots;
 pub mod predict;
 mod residuals;
 pub mod samples;
+pub mod scope_light;
 mod solver;
 pub mod specular;
 mod specular_fit;
@@ -28,4 +30,5 @@ pub use fit::{
 pub use model::CalibratedModel;
 pub use predict::{cos_theta_of, predict_frame, predict_pixels, Albedo};
 pub use samples::{density_weights_3d, pool_frames, FrameData, PoolOptions, PooledSamples};
+pub use scope_light::{with_video_gains, ScopeLight};
 pub use specular::{SpecularLobe, SpecularMode};
