@@ -468,6 +468,25 @@ fn register_command_writes_poses_and_a_report_and_refuses_bad_input() {
         "{err}"
     );
     assert!(!dir.join("reg3").exists());
+    // So is a scope light that is not a model's.
+    let bad = run(&[
+        "--quiet",
+        "register",
+        "case",
+        "--out",
+        "reg4",
+        "--scope-light",
+        "case",
+    ]);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        err.contains("case/shading.json")
+            && err.contains("scope light")
+            && err.lines().count() == 1,
+        "{err}"
+    );
+    assert!(!dir.join("reg4").exists());
 }
 
 #[test]

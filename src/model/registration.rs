@@ -61,6 +61,11 @@ pub struct PoseRegistration {
     /// poses above are then the tracked ones).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tracking: Option<TrackingSummary>,
+    /// The model whose calibrated light (the same bronchoscope's) the first round registered
+    /// against, with this video's gains (`--scope-light`); `None`: a light fitted at the given
+    /// poses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scope_light: Option<String>,
     /// Before/after overlays of a few frames, for the reports (not written to model.json).
     #[serde(skip)]
     pub overlays: Vec<PoseOverlay>,
@@ -74,6 +79,19 @@ pub struct PoseRegistration {
     /// What the rounds refined every frame's pose to, kept or not.
     #[serde(skip)]
     pub refined: Vec<PoseEntry>,
+}
+
+impl PoseRegistration {
+    /// What the first round registered against, as a sentence.
+    pub fn first_light_text(&self) -> String {
+        match &self.scope_light {
+            Some(source) => format!(
+                "The first round registered against the calibrated light of {source} (the same \
+                 bronchoscope), with this video's gains."
+            ),
+            None => "The first round registered against a light fitted at the given poses.".into(),
+        }
+    }
 }
 
 /// How tracking the video from its first frame's pose went (`--poses first`).

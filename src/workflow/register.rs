@@ -102,10 +102,11 @@ pub fn registration_report(
     let mut html = format!(
         "<!doctype html><meta charset=utf-8><title>bronchosim registration</title>\
          <style>body{{font-family:sans-serif;max-width:60em;margin:2em auto}}td,th{{padding:0 .6em}}</style>\
-         <h1>Registration of {}</h1><p>{} frames, {} left out of the model.</p>",
+         <h1>Registration of {}</h1><p>{} frames, {} left out of the model. {}</p>",
         html_escape(&case_dir.display().to_string()),
         reg.frames.len(),
-        reg.left_out
+        reg.left_out,
+        html_escape(&reg.first_light_text())
     );
     if let Some(t) = &reg.tracking {
         html.push_str(&tracking_html(t));
@@ -249,7 +250,7 @@ fn line_plot(values: &[f64], label: &str, colour: &str) -> String {
     )
 }
 
-fn html_escape(s: &str) -> String {
+pub(crate) fn html_escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")

@@ -14,7 +14,7 @@ use crate::shading::paper::plots::{plot_psi_slices, plot_samples_density};
 use crate::shading::paper::PsiModel;
 use crate::shading::{FittedShading, FrameShading, SampleSet};
 use crate::workflow::new_views_figure::NewViewsFigure;
-use crate::workflow::register::{correction_plots, pose_truth_html, tracking_html};
+use crate::workflow::register::{correction_plots, html_escape, pose_truth_html, tracking_html};
 use crate::workflow::registration_overlays::overlays_html;
 use crate::{Error, Result};
 use base64::Engine;
@@ -338,10 +338,11 @@ fn frame_figures(html: &mut String, inputs: &ReportInputs, tmp: &Path) -> Result
 fn registration_section(html: &mut String, reg: &PoseRegistration) {
     html.push_str(&format!(
         "<h2>Registration of the poses to the CT</h2><p>{} rounds; {} of {} frames left out \
-         (their pose could not be trusted). Each frame's correction of its given pose:</p>",
+         (their pose could not be trusted). {} Each frame's correction of its given pose:</p>",
         reg.rounds.len(),
         reg.left_out,
-        reg.frames.len()
+        reg.frames.len(),
+        html_escape(&reg.first_light_text())
     ));
     if let Some(t) = &reg.tracking {
         html.push_str(&tracking_html(t));

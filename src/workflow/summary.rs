@@ -106,7 +106,11 @@ fn registration_line(reg: &PoseRegistration) -> String {
             t.seconds_per_frame
         )
     });
+    let scope = reg.scope_light.as_ref().map_or(String::new(), |source| {
+        format!("  first round against the scope light of {source}\n")
+    });
     tracked
+        + &scope
         + &format!(
         "  poses registered in {} rounds: median correction {:.2} mm / {:.2} deg (largest {:.2} mm / {:.2} deg), {} of {} frames left out\n",
         reg.rounds.len(),

@@ -255,6 +255,12 @@ pub struct BuildArgs {
     /// cannot see an error all frames share (a turn about the airway's axis).
     #[arg(long, default_value_t = build_defaults().registration_geometry_every)]
     pub geometry_every: usize,
+    /// The calibrated light of a model built with the same bronchoscope (its folder or its
+    /// shading.json): the registration's first round registers against that light's shape,
+    /// with this video's gains, instead of a light fitted at the given poses, which follows
+    /// their errors. For tracker poses several millimetres off.
+    #[arg(long, value_name = "MODEL")]
+    pub scope_light: Option<PathBuf>,
     /// Most frames the model is built from: every frame is scored (sharpness against its
     /// neighbours, exposure) and the frames that add the most coverage of the wall are kept;
     /// blurred or badly exposed frames only where nothing better sees the wall (model.json
@@ -289,6 +295,12 @@ pub struct RegisterArgs {
     /// (0 rounds: tracking alone). `fixed` is refused: there would be nothing to do.
     #[arg(long, value_enum, default_value_t = PosesMode::Refine)]
     pub poses: PosesMode,
+    /// The calibrated light of a model built with the same bronchoscope (its folder or its
+    /// shading.json): the registration's first round registers against that light's shape,
+    /// with this video's gains, instead of a light fitted at the given poses, which follows
+    /// their errors. For tracker poses several millimetres off.
+    #[arg(long, value_name = "MODEL")]
+    pub scope_light: Option<PathBuf>,
     /// A truth folder with the frames' true poses (poses.json; e.g. the phantom's truth/):
     /// registration.json and the report then score the given and refined poses against them.
     #[arg(long)]

@@ -9,6 +9,7 @@ use args::{
     PhantomArgs, RegisterArgs, RenderArgs, SegmentArgs, ViewArgs,
 };
 use bronchosim::inspect::{inspect, InspectOptions};
+use bronchosim::io::scope_light::read_scope_light;
 use bronchosim::math::Point3;
 use bronchosim::phantom::baked_albedo::AlbedoSampling;
 use bronchosim::phantom::pose_noise::PoseNoise;
@@ -89,6 +90,7 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
         poses: a.poses,
         registration_rounds: a.registration_rounds,
         registration_geometry_every: a.geometry_every,
+        scope_light: a.scope_light.as_deref().map(read_scope_light).transpose()?,
         ..Default::default()
     };
     opts.selection.max_frames = a.max_frames;
@@ -137,6 +139,7 @@ fn register(a: RegisterArgs, quiet: bool) -> anyhow::Result<String> {
         registration_geometry_every: a.geometry_every,
         poses: a.poses,
         truth: a.truth,
+        scope_light: a.scope_light.as_deref().map(read_scope_light).transpose()?,
         ..Default::default()
     };
     let s = register_command(&a.case, &a.out, &opts)

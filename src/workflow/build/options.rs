@@ -2,7 +2,7 @@
 //! each default number is written; the command line takes its defaults from here).
 
 use crate::selection::SelectionOptions;
-use crate::shading::calibrated::{CalibratedOptions, PoolOptions};
+use crate::shading::calibrated::{CalibratedOptions, PoolOptions, ScopeLight};
 use crate::shading::indirect::InterreflectionMode;
 use crate::shading::paper::FitOptions;
 use crate::shading::{SampleOptions, ShadingKind};
@@ -118,6 +118,12 @@ pub struct BuildOptions {
     /// repeat's, and the light the refined poses are scored with pool `max_pooled_samples` like
     /// the build's).
     pub registration_light_samples: usize,
+    /// The calibrated light of a model built with the same bronchoscope (`--scope-light`):
+    /// the first registration round registers against its shape with this video's gains
+    /// instead of a light fitted at the given poses, which follows their errors (a real
+    /// airway, ATM_224, from tracker poses 3 mm / 4 deg off: the first round converged on 4 of
+    /// 30 frames against that light, on 25 against the scope's; BENCHMARKS.md, session 25).
+    pub scope_light: Option<ScopeLight>,
     /// Tracking from the first pose (`--poses first`).
     pub tracking: super::tracking::TrackingOptions,
     /// The registration stops when a round moves the median pose less than this (mm) and less
@@ -221,6 +227,7 @@ impl Default for BuildOptions {
             // (1.5 mm / 2 deg: 30.97 -> 30.92 dB, 0.399 -> 0.317 deg median) in a third of the
             // time.
             registration_light_samples: 100_000,
+            scope_light: None,
             tracking: Default::default(),
             truth: None,
             force: false,

@@ -15,13 +15,18 @@
 //! the truth that holding it in the image removes most of what pulls the geometry's turn and
 //! shift, the albedo a frame's colour does not predict.
 //!
+//! The first round's light is fitted at the given poses, and follows their errors: from poses a
+//! few millimetres off it may predict no frame well enough to register it. With a light
+//! calibrated on another video of the same bronchoscope (`BuildOptions::scope_light`) the first
+//! round registers against that light's shape instead, with this video's gains.
+//!
 //! Frames that end flagged (a wrong given pose, too few comparable pixels, a cost far above the
 //! video's) are left out of the model, never silently kept: [`PoseRegistration`] says which and
 //! why, and model.json counts them.
 
 use super::cross_validation::cross_validate;
 use super::error::BuildError;
-use super::fit_pass::fit_pass;
+use super::fit_pass::{fit_pass, LightSamples};
 use super::frames::DepthCache;
 use super::light::{calibrated_light, Consensus};
 use super::options::{BuildOptions, PosesMode};
@@ -38,7 +43,9 @@ use crate::registration::{
     ModelParts, RegistrationOptions, RoundKind, RoundOptions, TrackState, VideoOptions,
 };
 use crate::render::{MipOptions, MipTexture};
-use crate::shading::calibrated::{CalibratedModel, CalibratedOptions, SpecularMode};
+use crate::shading::calibrated::{
+    with_video_gains, CalibratedModel, CalibratedOptions, SpecularMode,
+};
 use crate::shading::{FittedShading, ShadingKind};
 use crate::workflow::progress::Progress;
 use crate::workflow::registration_overlays::{choose_overlay_frames, pose_overlays};
@@ -167,6 +174,11 @@ pub fn register_poses(
         ));
         scene.keep_frames(&keep, opts.depth_cache_bytes);
     }
+    let scope_light = opts
+        .scope_light
+        .as_ref()
+        .filter(|_| !rounds.is_empty())
+        .map(|s| s.source.display().to_string());
     Ok(Some(PoseRegistration {
         frames: results,
         rounds,
@@ -175,6 +187,7 @@ pub fn register_poses(
         held_out_psnr_given_db: given_score,
         held_out_psnr_refined_db: refined_score,
         tracking,
+        scope_light,
         overlays,
         given,
         poses,
@@ -267,12 +280,14 @@ fn run_rounds(
         // / 1.87 deg).
         let light = match (kind, last_light.take()) {
             (RoundKind::Texture, Some(l)) => l,
+            _ if r == 0 => {
+                let (fitted, scope) = first_light(scene, opts, warnings)?;
+                given_score = held_out_psnr(scene, &fitted, opts)?;
+                scope.unwrap_or(fitted)
+            }
             _ if r < every => round_light(scene, opts, warnings)?,
             _ => round_light(scene, &later_opts, warnings)?,
         };
-        if r == 0 {
-            given_score = held_out_psnr(scene, &light, opts)?;
-        }
         let before = scene.poses.clone();
         let (summary, frames_done) = run_round(scene, view, kind, &light, opts, r)?;
         *last_light = Some(light);
@@ -452,6 +467,30 @@ fn held_out_psnr(
     Ok(cv.models.first().and_then(|m| m.mean_psnr_db))
 }
 
+/// The first round's lights at the given poses: the light fitted there (which scores the given
+/// poses) and, with `opts.scope_light`, the scope's light with this video's gains fitted there
+/// (which the round registers against).
+fn first_light(
+    scene: &mut BuildScene,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+) -> Result<(CalibratedModel, Option<CalibratedModel>)> {
+    let (_, samples) = fit_pass(scene, opts)?;
+    let scope = match &opts.scope_light {
+        Some(scope) => Some(
+            with_video_gains(&scope.light, &samples.pooled).ok_or_else(|| {
+                BuildError::Registration(format!(
+                    "{}: no frame has enough samples to fit its gain in the scope light",
+                    scope.source.display()
+                ))
+            })?,
+        ),
+        None => None,
+    };
+    let fitted = light_from_samples(scene, samples, opts, warnings)?;
+    Ok((fitted, scope))
+}
+
 /// The calibrated light fitted with the scene's current poses (a first pass and the pooled
 /// fit with its refinements).
 pub(super) fn round_light(
@@ -460,6 +499,16 @@ pub(super) fn round_light(
     warnings: &mut Vec<String>,
 ) -> Result<CalibratedModel> {
     let (_, samples) = fit_pass(scene, opts)?;
+    light_from_samples(scene, samples, opts, warnings)
+}
+
+/// The calibrated light fitted to `samples` of the scene's frames at their current poses.
+fn light_from_samples(
+    scene: &BuildScene,
+    samples: LightSamples,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+) -> Result<CalibratedModel> {
     let mut round_warnings = Vec::new();
     let light_opts = BuildOptions {
         refine_gains: opts.registration_light_refinements,
