@@ -29,11 +29,13 @@ const MIN_FRAME_SAMPLES: usize = 20;
 /// `scope`'s light with gains fitted to `samples` (this video's frames at their current
 /// poses), its inter-reflection `kappa_c L_f` from the frames' own light and without the
 /// terms that belonged to the scope's video alone (free ambient, gathered inter-reflection,
-/// auto-exposure). The reference frame is the one with the median gain, and rho and the
-/// specular lobe carry the scale. `None` when no frame has enough samples.
+/// auto-exposure). The reference frame (gain 1) is `reference`, or else the one with the
+/// median gain; rho and the specular lobe carry the scale. `None` when no frame has enough
+/// samples.
 pub fn with_video_gains(
     scope: &CalibratedModel,
     samples: &PooledSamples,
+    reference: Option<usize>,
 ) -> Option<CalibratedModel> {
     let frames = samples.frames();
     let kappa_lum: Option<f64> = scope
@@ -85,13 +87,15 @@ pub fn with_video_gains(
     let median = *known.select_nth_unstable_by(mid, f64::total_cmp).1;
     let gains: Vec<f64> = fitted.iter().map(|g| g.unwrap_or(median)).collect();
     // The reference frame's gain is 1: the median frame's scale moves into rho (and the lobe).
-    let reference = (0..frames)
-        .min_by(|&a, &b| {
-            (gains[a] - median)
-                .abs()
-                .total_cmp(&(gains[b] - median).abs())
-        })
-        .unwrap_or(0);
+    let reference = reference.filter(|&r| r < frames).unwrap_or_else(|| {
+        (0..frames)
+            .min_by(|&a, &b| {
+                (gains[a] - median)
+                    .abs()
+                    .total_cmp(&(gains[b] - median).abs())
+            })
+            .unwrap_or(0)
+    });
     let scale = gains[reference];
     light.gains = gains.iter().map(|g| g / scale).collect();
     light.reference_frame = reference;
@@ -167,7 +171,7 @@ mod tests {
             s.frame_start.push(s.gamma.len());
             s.frame_light.push(l);
         }
-        let fitted = with_video_gains(&truth, &s).expect("gains");
+        let fitted = with_video_gains(&truth, &s, None).expect("gains");
         // Relative gains are the video's: against frame 2's, within 3 % (the albedo's median
         // is not its mean, which the common scale absorbs).
         for f in 0..true_gains.len() {
@@ -198,7 +202,7 @@ mod tests {
             frame_light: vec![0.1, 0.2],
             ..Default::default()
         };
-        assert!(with_video_gains(&truth, &s).is_none());
+        assert!(with_video_gains(&truth, &s, None).is_none());
         for i in 0..30 {
             let (gamma, cos_theta, z) = (0.9f64, 0.9f64, 5.0 + i as f64 * 0.1);
             let d = truth.eval_rgb(gamma, cos_theta, z, 2.0);
@@ -214,8 +218,14 @@ mod tests {
             s.pixel.push(0);
         }
         s.frame_start = vec![0, 0, 30];
-        let fitted = with_video_gains(&truth, &s).expect("gains");
+        let fitted = with_video_gains(&truth, &s, None).expect("gains");
         assert_eq!(fitted.gains, vec![1.0, 1.0]);
+        assert_eq!(
+            with_video_gains(&truth, &s, Some(0))
+                .unwrap()
+                .reference_frame,
+            0
+        );
         let k = fitted.rho[0][0] / truth.rho[0][0];
         assert!((k - 2.0).abs() < 1e-4, "scale {k}");
     }

@@ -478,7 +478,7 @@ fn first_light(
     let (_, samples) = fit_pass(scene, opts)?;
     let scope = match &opts.scope_light {
         Some(scope) => Some(
-            with_video_gains(&scope.light, &samples.pooled).ok_or_else(|| {
+            with_video_gains(&scope.light, &samples.pooled, None).ok_or_else(|| {
                 BuildError::Registration(format!(
                     "{}: no frame has enough samples to fit its gain in the scope light",
                     scope.source.display()

@@ -2,14 +2,17 @@
 //! frame's alone. The light and a consensus texture are fitted on the frames tracked so far
 //! (at first the trusted frame alone), the next `refit_every` frames are tracked against
 //! them ([`crate::registration::track`]), and the light is fitted again on the last
-//! `fit_frames` accepted frames, until the video ends.
+//! `fit_frames` accepted frames, until the video ends. With a scope light
+//! (`BuildOptions::scope_light`) only the frames' gains are fitted, in that light.
 
+use super::error::BuildError;
+use super::fit_pass::fit_pass;
 use super::options::BuildOptions;
 use super::registration::{consensus_texture, round_light, RegistrationView};
 use super::scene::BuildScene;
 use crate::model::registration::TrackingSummary;
 use crate::registration::{ModelParts, TrackOptions, TrackState, Tracker};
-use crate::shading::calibrated::CalibratedModel;
+use crate::shading::calibrated::{with_video_gains, CalibratedModel};
 use crate::Result;
 use std::time::Instant;
 
@@ -77,7 +80,21 @@ fn fit_model(
         ..opts.clone()
     };
     on_frames(scene, fit_on, opts, |s| {
-        let light = round_light(s, &fit_opts, warnings)?;
+        let light = match &opts.scope_light {
+            // The scope's light needs only the frames' gains, which a few frames fix as well
+            // as many; a light fitted on the first frames sees few distances and angles.
+            Some(scope) => {
+                let (_, samples) = fit_pass(s, &fit_opts)?;
+                with_video_gains(&scope.light, &samples.pooled, Some(fit_on.len() - 1))
+                    .ok_or_else(|| {
+                        BuildError::Registration(format!(
+                            "{}: no tracked frame has enough samples to fit its gain in the scope light",
+                            scope.source.display()
+                        ))
+                    })?
+            }
+            None => round_light(s, &fit_opts, warnings)?,
+        };
         let texture = consensus_texture(s, &light, &fit_opts)?;
         Ok((light, texture))
     })
