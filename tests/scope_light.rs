@@ -179,4 +179,8 @@ fn tracking_from_the_first_pose_in_the_scope_light_keeps_the_view_direction() {
         within_both >= 16,
         "{within_both} of 20 within 1 mm and 1 degree"
     );
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(
+        html.contains("The tracking from the first pose registered against the calibrated light")
+    );
 }

@@ -61,9 +61,9 @@ pub struct PoseRegistration {
     /// poses above are then the tracked ones).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tracking: Option<TrackingSummary>,
-    /// The model whose calibrated light (the same bronchoscope's) the first round registered
-    /// against, with this video's gains (`--scope-light`); `None`: a light fitted at the given
-    /// poses.
+    /// The model whose calibrated light (the same bronchoscope's) the first round and the
+    /// tracking from the first pose registered against, with this video's gains
+    /// (`--scope-light`); `None`: lights fitted at the given or tracked poses.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scope_light: Option<String>,
     /// Before/after overlays of a few frames, for the reports (not written to model.json).
@@ -82,14 +82,21 @@ pub struct PoseRegistration {
 }
 
 impl PoseRegistration {
-    /// What the first round registered against, as a sentence.
+    /// What the first round (and the tracking) registered against, as a sentence.
     pub fn first_light_text(&self) -> String {
+        let what = match (self.tracking.is_some(), self.rounds.is_empty()) {
+            (true, false) => "The tracking from the first pose and the first round",
+            (true, true) => "The tracking from the first pose",
+            (false, _) => "The first round",
+        };
         match &self.scope_light {
             Some(source) => format!(
-                "The first round registered against the calibrated light of {source} (the same \
+                "{what} registered against the calibrated light of {source} (the same \
                  bronchoscope), with this video's gains."
             ),
-            None => "The first round registered against a light fitted at the given poses.".into(),
+            None => {
+                format!("{what} registered against a light fitted at the poses it started from.")
+            }
         }
     }
 }

@@ -107,7 +107,7 @@ fn registration_line(reg: &PoseRegistration) -> String {
         )
     });
     let scope = reg.scope_light.as_ref().map_or(String::new(), |source| {
-        format!("  first round against the scope light of {source}\n")
+        format!("  registered against the scope light of {source}\n")
     });
     tracked
         + &scope

@@ -177,7 +177,7 @@ pub fn register_poses(
     let scope_light = opts
         .scope_light
         .as_ref()
-        .filter(|_| !rounds.is_empty())
+        .filter(|_| !rounds.is_empty() || tracking.is_some())
         .map(|s| s.source.display().to_string());
     Ok(Some(PoseRegistration {
         frames: results,
