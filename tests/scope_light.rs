@@ -2,8 +2,7 @@
 //! same bronchoscope (`--scope-light`, issue 16): the first round's light no longer follows the
 //! given poses' errors.
 
-use bronchosim::io::case::Case;
-use bronchosim::io::poses::{read_poses, write_poses, FrameRef};
+use bronchosim::io::poses::read_poses;
 use bronchosim::io::scope_light::read_scope_light;
 use bronchosim::math::Affine;
 use bronchosim::phantom::pose_noise::PoseNoise;
@@ -13,6 +12,10 @@ use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
 use bronchosim::workflow::register::register_command;
 use std::path::Path;
 use std::sync::OnceLock;
+
+#[path = "common/untracked.rs"]
+mod untracked;
+use untracked::{tracked_errors, untracked_phantom};
 
 fn phantom(dir: &Path, seed: u64, noise: PoseNoise) {
     let opts = PhantomOptions {
@@ -127,28 +130,8 @@ fn a_scope_light_from_another_video_registers_the_first_round() {
 fn tracking_from_the_first_pose_in_the_scope_light_keeps_the_view_direction() {
     let tmp = tempfile::tempdir().unwrap();
     let case_dir = tmp.path().join("case");
-    // The demo's pace (80 frames over the path), the first 20 frames kept, as in
-    // tests/tracking.rs `poses_first_tracks_the_video_from_one_pose`.
-    let opts = PhantomOptions {
-        frames: 80,
-        width: 128,
-        height: 128,
-        novel_views: 1,
-        ..Default::default()
-    };
-    write_phantom_case(&case_dir, &opts).unwrap();
-    let case = Case::open(&case_dir).unwrap();
-    for e in &case.poses[20..] {
-        let FrameRef::Image(p) = &e.frame else {
-            panic!("the phantom writes PNG frames")
-        };
-        std::fs::remove_file(p).unwrap();
-    }
-    let truth: Vec<Affine> = case.poses[..20]
-        .iter()
-        .map(|p| p.pose.camera_to_world)
-        .collect();
-    write_poses(&case_dir.join("poses.json"), &case.poses[..1], &case_dir).unwrap();
+    // The case of tests/tracking.rs `poses_first_tracks_the_video_from_one_pose`.
+    let truth = untracked_phantom(&case_dir, 20);
     let opts = BuildOptions {
         poses: PosesMode::First,
         registration_rounds: 0,
@@ -160,13 +143,8 @@ fn tracking_from_the_first_pose_in_the_scope_light_keeps_the_view_direction() {
     let out = tmp.path().join("reg");
     let s = register_command(&case_dir, &out, &opts).unwrap();
     let tracking = s.registration.tracking.clone().unwrap();
-    let errors: Vec<(f64, f64)> = poses(&out.join("poses.json"), &case_dir)
-        .iter()
-        .zip(&truth)
-        .map(|(p, t)| pose_error(p, t))
-        .collect();
-    let within_mm = errors.iter().filter(|e| e.0 <= 1.0).count();
-    let within_both = errors.iter().filter(|e| e.0 <= 1.0 && e.1 <= 1.0).count();
+    let (errors, within_mm, within_both) =
+        tracked_errors(&poses(&out.join("poses.json"), &case_dir), &truth);
     println!(
         "tracked {} of 20 (first lost {:?}); within 1 mm {within_mm}, within 1 mm and 1 deg {within_both}; errors {errors:?}",
         tracking.frames_tracked, tracking.first_lost

@@ -2,7 +2,7 @@
 //! report's before/after overlays (item 3), on a small phantom (24 frames, 160x160).
 
 use bronchosim::io::case::Case;
-use bronchosim::io::poses::{read_poses, write_poses, PoseEntry};
+use bronchosim::io::poses::{read_poses, PoseEntry};
 use bronchosim::math::Affine;
 use bronchosim::phantom::pose_noise::PoseNoise;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
@@ -10,6 +10,10 @@ use bronchosim::registration::pose_error;
 use bronchosim::workflow::build::{BuildOptions, PosesMode};
 use bronchosim::workflow::register::register_command;
 use std::path::Path;
+
+#[path = "common/untracked.rs"]
+mod untracked;
+use untracked::{tracked_errors, untracked_phantom};
 
 fn phantom(dir: &Path, noise: PoseNoise) -> Case {
     let opts = PhantomOptions {
@@ -31,25 +35,8 @@ fn poses_of(entries: &[PoseEntry]) -> Vec<Affine> {
 fn poses_first_tracks_the_video_from_one_pose() {
     let tmp = tempfile::tempdir().unwrap();
     let case_dir = tmp.path().join("case");
-    // The demo's pace (80 frames over the path, about 1.7 mm apart), first 20 frames kept.
-    let opts = PhantomOptions {
-        frames: 80,
-        width: 128,
-        height: 128,
-        novel_views: 1,
-        ..Default::default()
-    };
-    write_phantom_case(&case_dir, &opts).unwrap();
-    let case = Case::open(&case_dir).unwrap();
-    for e in &case.poses[20..] {
-        let bronchosim::io::poses::FrameRef::Image(p) = &e.frame else {
-            panic!("the phantom writes PNG frames")
-        };
-        std::fs::remove_file(p).unwrap();
-    }
-    let truth = poses_of(&case.poses[..20]);
     // The video without a tracker: poses.json holds the first frame's pose alone.
-    write_poses(&case_dir.join("poses.json"), &case.poses[..1], &case_dir).unwrap();
+    let truth = untracked_phantom(&case_dir, 20);
     let refused = Case::open(&case_dir).unwrap_err().to_string();
     assert!(refused.contains("fewer poses than frames"), "{refused}");
     let opened = Case::open_untracked(&case_dir).unwrap();
@@ -67,13 +54,7 @@ fn poses_first_tracks_the_video_from_one_pose() {
     let tracking = s.registration.tracking.clone().unwrap();
     let tracked = poses_of(&read_poses(&out.join("poses.json"), &case_dir).unwrap());
     assert_eq!(tracked.len(), 20);
-    let errors: Vec<(f64, f64)> = tracked
-        .iter()
-        .zip(&truth)
-        .map(|(p, t)| pose_error(p, t))
-        .collect();
-    let within_mm = errors.iter().filter(|e| e.0 <= 1.0).count();
-    let within_both = errors.iter().filter(|e| e.0 <= 1.0 && e.1 <= 1.0).count();
+    let (errors, within_mm, within_both) = tracked_errors(&tracked, &truth);
     println!(
         "tracked {} of 20 (first lost {:?}); within 1 mm {within_mm}, within 1 mm and 1 deg {within_both}; {:.2} s per frame; errors {:?}",
         tracking.frames_tracked, tracking.first_lost, tracking.seconds_per_frame, errors

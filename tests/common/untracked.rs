@@ -1,0 +1,48 @@
+//! A phantom video without a tracker (`--poses first`): the demo's pace (80 frames over the
+//! path, about 1.7 mm apart), its first frames kept, poses.json holding the first frame's pose
+//! alone.
+#![allow(dead_code)]
+
+use bronchosim::io::case::Case;
+use bronchosim::io::poses::{write_poses, FrameRef};
+use bronchosim::math::Affine;
+use bronchosim::phantom::{write_phantom_case, PhantomOptions};
+use std::path::Path;
+
+/// Write the case into `case_dir` with its first `kept` frames (128x128); returns their true
+/// poses.
+pub fn untracked_phantom(case_dir: &Path, kept: usize) -> Vec<Affine> {
+    let opts = PhantomOptions {
+        frames: 80,
+        width: 128,
+        height: 128,
+        novel_views: 1,
+        ..Default::default()
+    };
+    write_phantom_case(case_dir, &opts).unwrap();
+    let case = Case::open(case_dir).unwrap();
+    for e in &case.poses[kept..] {
+        let FrameRef::Image(p) = &e.frame else {
+            panic!("the phantom writes PNG frames")
+        };
+        std::fs::remove_file(p).unwrap();
+    }
+    write_poses(&case_dir.join("poses.json"), &case.poses[..1], case_dir).unwrap();
+    case.poses[..kept]
+        .iter()
+        .map(|p| p.pose.camera_to_world)
+        .collect()
+}
+
+/// Each pose's error against its true pose (mm, degrees), and how many are within 1 mm, and
+/// within 1 mm and 1 degree.
+pub fn tracked_errors(poses: &[Affine], truth: &[Affine]) -> (Vec<(f64, f64)>, usize, usize) {
+    let errors: Vec<(f64, f64)> = poses
+        .iter()
+        .zip(truth)
+        .map(|(p, t)| bronchosim::registration::pose_error(p, t))
+        .collect();
+    let within_mm = errors.iter().filter(|e| e.0 <= 1.0).count();
+    let within_both = errors.iter().filter(|e| e.0 <= 1.0 && e.1 <= 1.0).count();
+    (errors, within_mm, within_both)
+}
