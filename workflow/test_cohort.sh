@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The cohort workflow end to end (issue 20): three small phantom cases, one broken (no CT), run
 # with `--cores 2 --keep-going`; then: two models, the broken case failed with its error,
-# cohort.csv with three rows; a second run has nothing to do; a changed case (and the fixed
-# broken one) and nothing else is planned again; the SLURM profile's dry run plans every job.
+# cohort.csv with three rows; a second run has nothing to do; a scope light plans the builds
+# again with it; a changed case (and the fixed broken one) and nothing else is planned again;
+# the SLURM profile's dry run plans every job.
 #
 #   bash workflow/test_cohort.sh [BRONCHOSIM_BINARY]
 #
@@ -123,6 +124,17 @@ run >"$work/run2.log" 2>&1 || { tail -n 20 "$work/run2.log"; fail "second run fa
 grep -q "Nothing to be done" "$work/run2.log" || { tail -n 30 "$work/run2.log"; fail "second run did something"; }
 echo "second run: $((SECONDS - t)) s"
 pass "second run: nothing to be done"
+
+# The same bronchoscope's light for every build (p1's model standing for a calibrated scope):
+# the builds are planned again with --scope-light; a scope light that is not there is named
+# before any job.
+with_scope() { snakemake -s workflow/Snakefile --cores 2 --dry-run --printshellcmds --config "${config[@]}" scope_light="$1"; }
+with_scope "$work/out/p1/model" >"$work/scope.log" 2>&1 || { tail -n 20 "$work/scope.log"; fail "dry run with a scope light failed"; }
+n=$(grep -c -- "--scope-light [^ ]*/out/p1/model/shading.json" "$work/scope.log" || true)
+[ "$n" -ge 2 ] || { tail -n 30 "$work/scope.log"; fail "dry run with a scope light: $n build commands with --scope-light (want p1's and p2's)"; }
+if with_scope "$work/nowhere" >"$work/scope_bad.log" 2>&1; then fail "a scope light that is not there was accepted"; fi
+grep -q "scope_light=$work/nowhere" "$work/scope_bad.log" || { tail -n 5 "$work/scope_bad.log"; fail "the missing scope light is not named"; }
+pass "scope_light: the builds planned again with --scope-light; a missing one named"
 
 # A changed frame of p2 (new content: Snakemake compares checksums of inputs under 1 MB, so a
 # mere touch is no change) and a CT given to the broken case: only those two are planned again.
