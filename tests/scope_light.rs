@@ -5,10 +5,13 @@
 use bronchosim::io::poses::read_poses;
 use bronchosim::io::scope_light::read_scope_light;
 use bronchosim::math::Affine;
+use bronchosim::model::manifest::BuildTimings;
 use bronchosim::phantom::pose_noise::PoseNoise;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::registration::pose_error;
-use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
+use bronchosim::workflow::build::{
+    build_model, register_poses, BuildOptions, BuildScene, PosesMode,
+};
 use bronchosim::workflow::register::register_command;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -160,5 +163,30 @@ fn tracking_from_the_first_pose_in_the_scope_light_keeps_the_view_direction() {
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(
         html.contains("The tracking from the first pose registered against the calibrated light")
+    );
+}
+
+/// With poses that are not registered the scope light has nothing to serve: a warning says so.
+#[test]
+fn a_scope_light_with_fixed_poses_is_named_as_unused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let case = tmp.path().join("case");
+    phantom(&case, 1, PoseNoise::new(0.0, 0.0));
+    let opts = BuildOptions {
+        poses: PosesMode::Fixed,
+        scope_light: Some(read_scope_light(scope_model()).unwrap()),
+        quiet: true,
+        ..Default::default()
+    };
+    let mut scene = BuildScene::prepare(&case, &opts, &mut BuildTimings::default()).unwrap();
+    let mut warnings = Vec::new();
+    assert!(register_poses(&mut scene, &opts, &mut warnings)
+        .unwrap()
+        .is_none());
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("shading.json") && w.contains("not used")),
+        "{warnings:?}"
     );
 }

@@ -71,6 +71,12 @@ pub fn register_poses(
 ) -> Result<Option<PoseRegistration>> {
     let first = opts.poses == PosesMode::First;
     if opts.poses == PosesMode::Fixed || (!first && opts.registration_rounds == 0) {
+        if let Some(scope) = &opts.scope_light {
+            warnings.push(format!(
+                "the scope light {} serves the registration only, and the poses were not registered: it was not used",
+                scope.source.display()
+            ));
+        }
         return Ok(None);
     }
     let view = RegistrationView::new(scene, opts.quiet)?;
