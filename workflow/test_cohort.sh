@@ -125,16 +125,19 @@ grep -q "Nothing to be done" "$work/run2.log" || { tail -n 30 "$work/run2.log"; 
 echo "second run: $((SECONDS - t)) s"
 pass "second run: nothing to be done"
 
-# The same bronchoscope's light for every build (p1's model standing for a calibrated scope):
-# the builds are planned again with --scope-light; a scope light that is not there is named
-# before any job.
+# The same bronchoscope's light for every build (a copy of p1's model standing for a calibrated
+# scope): the builds are planned again with --scope-light; a scope light that is not there, or
+# one under out/ (which the cohort rebuilds), is named before any job.
 with_scope() { snakemake -s workflow/Snakefile --cores 2 --dry-run --printshellcmds --config "${config[@]}" scope_light="$1"; }
-with_scope "$work/out/p1/model" >"$work/scope.log" 2>&1 || { tail -n 20 "$work/scope.log"; fail "dry run with a scope light failed"; }
-n=$(grep -c -- "--scope-light [^ ]*/out/p1/model/shading.json" "$work/scope.log" || true)
+cp -r "$work/out/p1/model" "$work/scope"
+with_scope "$work/scope" >"$work/scope.log" 2>&1 || { tail -n 20 "$work/scope.log"; fail "dry run with a scope light failed"; }
+n=$(grep -c -- "--scope-light [^ ]*/scope/shading.json" "$work/scope.log" || true)
 [ "$n" -ge 2 ] || { tail -n 30 "$work/scope.log"; fail "dry run with a scope light: $n build commands with --scope-light (want p1's and p2's)"; }
-if with_scope "$work/nowhere" >"$work/scope_bad.log" 2>&1; then fail "a scope light that is not there was accepted"; fi
-grep -q "scope_light=$work/nowhere" "$work/scope_bad.log" || { tail -n 5 "$work/scope_bad.log"; fail "the missing scope light is not named"; }
-pass "scope_light: the builds planned again with --scope-light; a missing one named"
+for bad in "$work/nowhere" "$work/out/p1/model"; do
+  if with_scope "$bad" >"$work/scope_bad.log" 2>&1; then fail "scope_light=$bad was accepted"; fi
+  grep -q "scope_light=$bad" "$work/scope_bad.log" || { tail -n 5 "$work/scope_bad.log"; fail "scope_light=$bad is not named"; }
+done
+pass "scope_light: the builds planned again with --scope-light; a missing one and one under out/ named"
 
 # A changed frame of p2 (new content: Snakemake compares checksums of inputs under 1 MB, so a
 # mere touch is no change) and a CT given to the broken case: only those two are planned again.
