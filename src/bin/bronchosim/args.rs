@@ -247,7 +247,7 @@ pub struct BuildArgs {
     pub poses: PosesMode,
     /// Most rounds of the registration (light + texture, then every frame's pose); rounds
     /// 0, N, 2N, ... (N = --geometry-every) register against the CT's geometry alone, and so
-    /// does the round after a geometry round that leaves over a quarter of the frames outliers;
+    /// does the round after a geometry round that leaves over a fifth of the frames outliers;
     /// from round 6 on those rounds also hold the texture's albedo in the image.
     #[arg(long, default_value_t = build_defaults().registration_rounds)]
     pub registration_rounds: usize,
@@ -282,7 +282,7 @@ pub struct RegisterArgs {
     pub out: PathBuf,
     /// Most rounds (light + texture, then every frame's pose); rounds 0, N, 2N, ...
     /// (N = --geometry-every) register against the CT's geometry alone, and so does the round
-    /// after a geometry round that leaves over a quarter of the frames outliers; from round 6
+    /// after a geometry round that leaves over a fifth of the frames outliers; from round 6
     /// on those rounds also hold the texture's albedo in the image.
     #[arg(long, default_value_t = build_defaults().registration_rounds)]
     pub rounds: usize,

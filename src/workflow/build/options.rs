@@ -216,8 +216,11 @@ impl Default for BuildOptions {
             registration_shading_from: 6,
             // From tracker poses 3 mm / 4 deg off, the demo phantom's first geometry round
             // leaves 37 of 80 frames outliers, a second one 8; from 1.5 mm / 2 deg 10, and a
-            // second round there was no better (BENCHMARKS.md, issue 16, session 12).
-            registration_geometry_repeat_share: 0.25,
+            // second round there was no better (BENCHMARKS.md, issue 16, session 12). A real
+            // airway (ATM_224) from 4 mm / 5 deg with a scope light: 7 of 30, and the round
+            // repeated 0.099 mm / 0.402 deg, 29/30 frames, against 0.186 mm / 0.804 deg, 18/30
+            // without (BENCHMARKS.md, session 25).
+            registration_geometry_repeat_share: 0.2,
             registration_min_converged_share: 0.25,
             registration_keep_margin_db: 1.0,
             registration_tolerance_mm: 0.05,
