@@ -44,7 +44,7 @@ use crate::registration::{
 };
 use crate::render::{MipOptions, MipTexture};
 use crate::shading::calibrated::{
-    with_video_gains, CalibratedModel, CalibratedOptions, SpecularMode,
+    with_video_gains, CalibratedModel, CalibratedOptions, PooledSamples, ScopeLight, SpecularMode,
 };
 use crate::shading::{FittedShading, ShadingKind};
 use crate::workflow::progress::Progress;
@@ -483,18 +483,27 @@ fn first_light(
 ) -> Result<(CalibratedModel, Option<CalibratedModel>)> {
     let (_, samples) = fit_pass(scene, opts)?;
     let scope = match &opts.scope_light {
-        Some(scope) => Some(
-            with_video_gains(&scope.light, &samples.pooled, None).ok_or_else(|| {
-                BuildError::Registration(format!(
-                    "{}: no frame has enough samples to fit its gain in the scope light",
-                    scope.source.display()
-                ))
-            })?,
-        ),
+        Some(scope) => Some(scope_light_with_gains(scope, &samples.pooled, None)?),
         None => None,
     };
     let fitted = light_from_samples(scene, samples, opts, warnings)?;
     Ok((fitted, scope))
+}
+
+/// `scope`'s light with the gains of the frames of `samples` ([`with_video_gains`]; the
+/// reference frame `reference` or the median one).
+pub(super) fn scope_light_with_gains(
+    scope: &ScopeLight,
+    samples: &PooledSamples,
+    reference: Option<usize>,
+) -> Result<CalibratedModel> {
+    with_video_gains(&scope.light, samples, reference).ok_or_else(|| {
+        BuildError::Registration(format!(
+            "{}: no frame has enough samples to fit its gain in the scope light",
+            scope.source.display()
+        ))
+        .into()
+    })
 }
 
 /// The calibrated light fitted with the scene's current poses (a first pass and the pooled

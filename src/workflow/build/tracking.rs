@@ -5,14 +5,15 @@
 //! `fit_frames` accepted frames, until the video ends. With a scope light
 //! (`BuildOptions::scope_light`) only the frames' gains are fitted, in that light.
 
-use super::error::BuildError;
 use super::fit_pass::fit_pass;
 use super::options::BuildOptions;
-use super::registration::{consensus_texture, round_light, RegistrationView};
+use super::registration::{
+    consensus_texture, round_light, scope_light_with_gains, RegistrationView,
+};
 use super::scene::BuildScene;
 use crate::model::registration::TrackingSummary;
 use crate::registration::{ModelParts, TrackOptions, TrackState, Tracker};
-use crate::shading::calibrated::{with_video_gains, CalibratedModel};
+use crate::shading::calibrated::CalibratedModel;
 use crate::Result;
 use std::time::Instant;
 
@@ -85,13 +86,7 @@ fn fit_model(
             // as many; a light fitted on the first frames sees few distances and angles.
             Some(scope) => {
                 let (_, samples) = fit_pass(s, &fit_opts)?;
-                with_video_gains(&scope.light, &samples.pooled, Some(fit_on.len() - 1))
-                    .ok_or_else(|| {
-                        BuildError::Registration(format!(
-                            "{}: no tracked frame has enough samples to fit its gain in the scope light",
-                            scope.source.display()
-                        ))
-                    })?
+                scope_light_with_gains(scope, &samples.pooled, Some(fit_on.len() - 1))?
             }
             None => round_light(s, &fit_opts, warnings)?,
         };
