@@ -15,10 +15,9 @@ pub fn read_scope_light(path: &Path) -> Result<ScopeLight> {
         false => path.to_path_buf(),
     };
     let text = std::fs::read_to_string(&file).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => Error::missing(
-            &file,
-            "the scope light (a model folder or its shading.json)",
-        ),
+        std::io::ErrorKind::NotFound => {
+            Error::missing(&file, "the scope light: a model folder or its shading.json")
+        }
         _ => Error::io(&file, e),
     })?;
     let shading: FittedShading = serde_json::from_str(&text)
