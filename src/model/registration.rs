@@ -38,6 +38,9 @@ pub struct RoundSummary {
     pub realigned: usize,
     /// Wall time of the round (s): light, texture and registration.
     pub seconds: f64,
+    /// The round converged on too few frames and its poses were discarded.
+    #[serde(default)]
+    pub discarded: bool,
 }
 
 /// What the registration stage did.
@@ -66,6 +69,11 @@ pub struct PoseRegistration {
     /// (`--scope-light`); `None`: lights fitted at the given or tracked poses.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scope_light: Option<String>,
+    /// The first round was run again against a Lambertian lamp with a uniform beam and this
+    /// video's gains ([`crate::shading::calibrated::lambert_lamp`]): against the light fitted
+    /// at the given poses it converged on too few frames.
+    #[serde(default)]
+    pub lambert_lamp: bool,
     /// Before/after overlays of a few frames, for the reports (not written to model.json).
     #[serde(skip)]
     pub overlays: Vec<PoseOverlay>,
@@ -82,6 +90,15 @@ pub struct PoseRegistration {
 }
 
 impl PoseRegistration {
+    /// How many rounds ran, and how many of them were discarded: "9 rounds (1 discarded)".
+    pub fn rounds_text(&self) -> String {
+        let discarded = self.rounds.iter().filter(|r| r.discarded).count();
+        match discarded {
+            0 => format!("{} rounds", self.rounds.len()),
+            d => format!("{} rounds ({d} discarded)", self.rounds.len()),
+        }
+    }
+
     /// What the first round (and the tracking) registered against, as a sentence.
     pub fn first_light_text(&self) -> String {
         let what = match (self.tracking.is_some(), self.rounds.is_empty()) {
@@ -89,12 +106,17 @@ impl PoseRegistration {
             (true, true) => "The tracking from the first pose",
             (false, _) => "The first round",
         };
-        match &self.scope_light {
-            Some(source) => format!(
+        match (&self.scope_light, self.lambert_lamp) {
+            (Some(source), _) => format!(
                 "{what} registered against the calibrated light of {source} (the same \
                  bronchoscope), with this video's gains."
             ),
-            None => {
+            (None, true) => format!(
+                "{what} registered against a Lambertian lamp with a uniform beam and this \
+                 video's gains: against the light fitted at the poses it started from it \
+                 converged on too few frames."
+            ),
+            (None, false) => {
                 format!("{what} registered against a light fitted at the poses it started from.")
             }
         }

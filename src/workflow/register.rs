@@ -127,7 +127,11 @@ pub fn registration_report(
             html,
             "<tr><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{:.1}</td></tr>",
             i + 1,
-            r.against,
+            if r.discarded {
+                format!("{} (discarded)", r.against)
+            } else {
+                r.against.clone()
+            },
             r.median_step_mm,
             r.median_step_deg,
             counts.join(", "),

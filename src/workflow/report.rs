@@ -337,9 +337,9 @@ fn frame_figures(html: &mut String, inputs: &ReportInputs, tmp: &Path) -> Result
 /// The registration's corrections over the video and its rounds (issue 16).
 fn registration_section(html: &mut String, reg: &PoseRegistration) {
     html.push_str(&format!(
-        "<h2>Registration of the poses to the CT</h2><p>{} rounds; {} of {} frames left out \
+        "<h2>Registration of the poses to the CT</h2><p>{}; {} of {} frames left out \
          (their pose could not be trusted). {} Each frame's correction of its given pose:</p>",
-        reg.rounds.len(),
+        reg.rounds_text(),
         reg.left_out,
         reg.frames.len(),
         html_escape(&reg.first_light_text())

@@ -106,14 +106,16 @@ fn registration_line(reg: &PoseRegistration) -> String {
             t.seconds_per_frame
         )
     });
-    let scope = reg.scope_light.as_ref().map_or(String::new(), |source| {
-        format!("  registered against the scope light of {source}\n")
-    });
+    let scope = match (&reg.scope_light, reg.lambert_lamp) {
+        (Some(source), _) => format!("  registered against the scope light of {source}\n"),
+        (None, true) => "  first round run again against a Lambertian lamp (the light fitted at the given poses converged on too few frames)\n".to_string(),
+        (None, false) => String::new(),
+    };
     tracked
         + &scope
         + &format!(
-        "  poses registered in {} rounds: median correction {:.2} mm / {:.2} deg (largest {:.2} mm / {:.2} deg), {} of {} frames left out\n",
-        reg.rounds.len(),
+        "  poses registered in {}: median correction {:.2} mm / {:.2} deg (largest {:.2} mm / {:.2} deg), {} of {} frames left out\n",
+        reg.rounds_text(),
         mm.get(mid).copied().unwrap_or(0.0),
         deg.get(mid).copied().unwrap_or(0.0),
         mm.last().copied().unwrap_or(0.0),

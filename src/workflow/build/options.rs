@@ -124,6 +124,12 @@ pub struct BuildOptions {
     /// airway, ATM_224, from tracker poses 3 mm / 4 deg off: the first round converged on 4 of
     /// 30 frames against that light, on 25 against the scope's; BENCHMARKS.md, session 25).
     pub scope_light: Option<ScopeLight>,
+    /// Without a scope light, a first round that fails against the light fitted at the given
+    /// poses is run again against a Lambertian lamp with a uniform beam and this video's gains
+    /// (`shading::calibrated::lambert_lamp`), a light that needs no poses (ATM_224 from 3 mm /
+    /// 4 deg: 4 of 30 frames converged against the fitted light, and the build kept the given
+    /// poses; BENCHMARKS.md, session 26).
+    pub registration_lambert_fallback: bool,
     /// Tracking from the first pose (`--poses first`).
     pub tracking: super::tracking::TrackingOptions,
     /// The registration stops when a round moves the median pose less than this (mm) and less
@@ -231,6 +237,7 @@ impl Default for BuildOptions {
             // time.
             registration_light_samples: 100_000,
             scope_light: None,
+            registration_lambert_fallback: true,
             tracking: Default::default(),
             truth: None,
             force: false,

@@ -18,7 +18,10 @@
 //! The first round's light is fitted at the given poses, and follows their errors: from poses a
 //! few millimetres off it may predict no frame well enough to register it. With a light
 //! calibrated on another video of the same bronchoscope (`BuildOptions::scope_light`) the first
-//! round registers against that light's shape instead, with this video's gains.
+//! round registers against that light's shape instead, with this video's gains. Without one, a
+//! first round that converges on too few frames is run again against a Lambertian lamp with a
+//! uniform beam (`shading::calibrated::lambert_lamp`), with this video's gains: a light that
+//! needs no poses, whose shape is not this scope's.
 //!
 //! Frames that end flagged (a wrong given pose, too few comparable pixels, a cost far above the
 //! video's) are left out of the model, never silently kept: [`PoseRegistration`] says which and
@@ -44,7 +47,8 @@ use crate::registration::{
 };
 use crate::render::{MipOptions, MipTexture};
 use crate::shading::calibrated::{
-    with_video_gains, CalibratedModel, CalibratedOptions, PooledSamples, ScopeLight, SpecularMode,
+    lambert_lamp, with_video_gains, CalibratedModel, CalibratedOptions, PooledSamples, ScopeLight,
+    SpecularMode,
 };
 use crate::shading::{FittedShading, ShadingKind};
 use crate::workflow::progress::Progress;
@@ -93,7 +97,11 @@ pub fn register_poses(
         true if !opts.tracking.refine_after => 0,
         _ => opts.registration_rounds,
     };
-    let (rounds, given_score) = run_rounds(
+    let RoundsRun {
+        rounds,
+        given_score,
+        lambert_lamp,
+    } = run_rounds(
         scene,
         &view,
         rounds_to_run,
@@ -194,6 +202,7 @@ pub fn register_poses(
         held_out_psnr_refined_db: refined_score,
         tracking,
         scope_light,
+        lambert_lamp,
         overlays,
         given,
         poses,
@@ -243,10 +252,21 @@ impl RegistrationView {
     }
 }
 
+/// What [`run_rounds`] did.
+struct RoundsRun {
+    /// The rounds, discarded ones included.
+    rounds: Vec<RoundSummary>,
+    /// The held-out PSNR at the poses the rounds started from.
+    given_score: Option<f64>,
+    /// The first round was run again against the Lambertian lamp.
+    lambert_lamp: bool,
+}
+
 /// Up to `count` rounds of the alternation from the scene's poses (the first, every
 /// `registration_geometry_every`-th and the one after an unsettled geometry round against the
-/// geometry); each frame's status and the last round's light are updated. Returns the rounds
-/// and the held-out PSNR at the poses they started from.
+/// geometry); each frame's status and the last round's light are updated. A first round that
+/// fails against the light fitted at the given poses is run again against the Lambertian lamp
+/// (`BuildOptions::registration_lambert_fallback`).
 fn run_rounds(
     scene: &mut BuildScene,
     view: &RegistrationView,
@@ -255,9 +275,11 @@ fn run_rounds(
     warnings: &mut Vec<String>,
     statuses: &mut Vec<(String, bool)>,
     last_light: &mut Option<CalibratedModel>,
-) -> Result<(Vec<RoundSummary>, Option<f64>)> {
+) -> Result<RoundsRun> {
     let mut rounds = Vec::new();
     let mut given_score = None;
+    let mut lamp = None;
+    let mut lambert_lamp = false;
     let every = opts.registration_geometry_every.max(1);
     let mut r = 0;
     let mut repeat_geometry = false;
@@ -287,17 +309,37 @@ fn run_rounds(
         let light = match (kind, last_light.take()) {
             (RoundKind::Texture, Some(l)) => l,
             _ if r == 0 => {
-                let (fitted, scope) = first_light(scene, opts, warnings)?;
-                given_score = held_out_psnr(scene, &fitted, opts)?;
-                scope.unwrap_or(fitted)
+                let lights = first_light(scene, opts, warnings)?;
+                given_score = held_out_psnr(scene, &lights.fitted, opts)?;
+                lamp = lights.lamp;
+                lights.scope.unwrap_or(lights.fitted)
             }
             _ if r < every => round_light(scene, opts, warnings)?,
             _ => round_light(scene, &later_opts, warnings)?,
         };
         let before = scene.poses.clone();
-        let (summary, frames_done) = run_round(scene, view, kind, &light, opts, r)?;
+        let (mut summary, mut frames_done) = run_round(scene, view, kind, &light, opts, r)?;
+        let mut light = light;
+        let mut converged = frames_done.iter().filter(|f| !flagged(f.status)).count();
+        let min_share = opts.registration_min_converged_share;
+        if let Some(l) = lamp
+            .take()
+            .filter(|_| round_failed(converged, frames_done.len(), min_share))
+        {
+            warnings.push(format!(
+                "registration: round 1 (geometry) converged on {converged} of {} frames against the light fitted at the given poses; it was run again against a Lambertian lamp with this video's gains",
+                frames_done.len()
+            ));
+            scene.poses = before.clone();
+            scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
+            summary.discarded = true;
+            rounds.push(summary);
+            (summary, frames_done) = run_round(scene, view, kind, &l, opts, r)?;
+            converged = frames_done.iter().filter(|f| !flagged(f.status)).count();
+            light = l;
+            lambert_lamp = true;
+        }
         *last_light = Some(light);
-        let converged = frames_done.iter().filter(|f| !flagged(f.status)).count();
         if round_failed(
             converged,
             frames_done.len(),
@@ -315,6 +357,7 @@ fn run_rounds(
                 // No round was kept: every frame stays at its given pose.
                 *statuses = vec![("given".to_string(), false); frames_done.len()];
             }
+            summary.discarded = true;
             rounds.push(summary);
             break;
         }
@@ -335,7 +378,11 @@ fn run_rounds(
             r + 1
         };
     }
-    Ok((rounds, given_score))
+    Ok(RoundsRun {
+        rounds,
+        given_score,
+        lambert_lamp,
+    })
 }
 
 /// The coarsest pyramid level of the texture rounds from round `LATER_TEXTURE_FROM_ROUND` on:
@@ -453,6 +500,7 @@ fn run_round(
         counts: video.counts.clone(),
         realigned: video.realigned,
         seconds: started.elapsed().as_secs_f64(),
+        discarded: false,
     };
     scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
     Ok((summary, video.frames))
@@ -473,21 +521,43 @@ fn held_out_psnr(
     Ok(cv.models.first().and_then(|m| m.mean_psnr_db))
 }
 
-/// The first round's lights at the given poses: the light fitted there (which scores the given
-/// poses) and, with `opts.scope_light`, the scope's light with this video's gains fitted there
-/// (which the round registers against).
+/// The first round's lights, their gains fitted at the given poses.
+struct FirstLights {
+    /// Fitted there: it scores the given poses, and the round registers against it unless
+    /// `scope` is set.
+    fitted: CalibratedModel,
+    /// The scope's light (`opts.scope_light`).
+    scope: Option<CalibratedModel>,
+    /// The Lambertian lamp, for a round that fails against `fitted`
+    /// (`opts.registration_lambert_fallback`, without a scope light).
+    lamp: Option<CalibratedModel>,
+}
+
+/// The first round's lights at the given poses.
 fn first_light(
     scene: &mut BuildScene,
     opts: &BuildOptions,
     warnings: &mut Vec<String>,
-) -> Result<(CalibratedModel, Option<CalibratedModel>)> {
+) -> Result<FirstLights> {
     let (_, samples) = fit_pass(scene, opts)?;
     let scope = match &opts.scope_light {
         Some(scope) => Some(scope_light_with_gains(scope, &samples.pooled, None)?),
         None => None,
     };
+    let wants_lamp = scope.is_none() && opts.registration_lambert_fallback;
+    let pooled = wants_lamp.then(|| samples.pooled.clone());
     let fitted = light_from_samples(scene, samples, opts, warnings)?;
-    Ok((fitted, scope))
+    // The inter-reflection's kappa is the fitted light's: a share of each frame's own light,
+    // which a few millimetres move little.
+    let lamp = pooled.and_then(|p| {
+        lambert_lamp(&p, fitted.interreflection, fitted.cos_theta_edge)
+            .and_then(|lamp| with_video_gains(&lamp, &p, None))
+    });
+    Ok(FirstLights {
+        fitted,
+        scope,
+        lamp,
+    })
 }
 
 /// `scope`'s light with the gains of the frames of `samples` ([`with_video_gains`]; the
