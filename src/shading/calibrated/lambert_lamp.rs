@@ -67,9 +67,9 @@ mod tests {
                 let gamma = 0.2 + 0.8 * rng.uniform();
                 let z = 3.0 + 20.0 * rng.uniform();
                 let albedo = 0.6 + 0.8 * rng.uniform();
-                for ch in 0..3 {
-                    let i = g * albedo * colour[ch] * gamma / (z * z);
-                    s.rgb[ch].push((i * (1.0 + 0.02 * rng.normal())) as f32);
+                for (rgb, c) in s.rgb.iter_mut().zip(colour) {
+                    let i = g * albedo * c * gamma / (z * z);
+                    rgb.push((i * (1.0 + 0.02 * rng.normal())) as f32);
                 }
                 s.gamma.push(gamma as f32);
                 s.cos_theta.push((0.6 + 0.4 * rng.uniform()) as f32);
