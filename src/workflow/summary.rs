@@ -106,13 +106,13 @@ fn registration_line(reg: &PoseRegistration) -> String {
             t.seconds_per_frame
         )
     });
-    let scope = match (&reg.scope_light, reg.lambert_lamp) {
+    let first_light = match (&reg.scope_light, reg.lambert_lamp) {
         (Some(source), _) => format!("  registered against the scope light of {source}\n"),
         (None, true) => "  first round run again against a Lambertian lamp (the light fitted at the given poses converged on too few frames)\n".to_string(),
         (None, false) => String::new(),
     };
     tracked
-        + &scope
+        + &first_light
         + &format!(
         "  poses registered in {}: median correction {:.2} mm / {:.2} deg (largest {:.2} mm / {:.2} deg), {} of {} frames left out\n",
         reg.rounds_text(),
