@@ -127,8 +127,7 @@ pub fn register_poses(
     let kept_given = matches!((given_score, refined_score), (Some(g), Some(r)) if r <= g + margin);
     let registered = scene.poses.clone();
     if kept_given {
-        scene.poses = given.clone();
-        scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
+        set_poses(scene, given.clone(), opts);
         warnings.push(format!(
             "registration: the refined poses do not predict held-out frames more than {margin} dB better than the given ones (refined {:.2} dB, given {:.2} dB); the model is built with the given poses",
             refined_score.unwrap_or(f64::NAN),
@@ -330,8 +329,7 @@ fn run_rounds(
                 "registration: round 1 (geometry) converged on {converged} of {} frames against the light fitted at the given poses; it was run again against a Lambertian lamp with this video's gains",
                 frames_done.len()
             ));
-            scene.poses = before.clone();
-            scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
+            set_poses(scene, before.clone(), opts);
             summary.discarded = true;
             rounds.push(summary);
             (summary, frames_done) = run_round(scene, view, kind, &l, opts, r)?;
@@ -340,13 +338,8 @@ fn run_rounds(
             lambert_lamp = true;
         }
         *last_light = Some(light);
-        if round_failed(
-            converged,
-            frames_done.len(),
-            opts.registration_min_converged_share,
-        ) {
-            scene.poses = before;
-            scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
+        if round_failed(converged, frames_done.len(), min_share) {
+            set_poses(scene, before, opts);
             warnings.push(format!(
                 "registration: round {} ({}) converged on {converged} of {} frames; its poses are discarded and the rounds stop there (the poses it started from may be too far off for the photometric registration: check them, or build with --poses fixed)",
                 r + 1,
@@ -396,6 +389,12 @@ fn run_rounds(
 const LATER_TEXTURE_COARSEST_LEVEL: usize = 1;
 /// The round from which texture rounds start at `LATER_TEXTURE_COARSEST_LEVEL`.
 const LATER_TEXTURE_FROM_ROUND: usize = 2;
+
+/// Put the scene's frames at `poses`: the depths cached at the old ones are dropped.
+fn set_poses(scene: &mut BuildScene, poses: Vec<Affine>, opts: &BuildOptions) {
+    scene.poses = poses;
+    scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
+}
 
 /// Whether a round on which `converged` of `frames` frames converged has failed (fewer than
 /// `min_share` of them): the drift the video's smoother fits to so few frames would move all
@@ -481,9 +480,7 @@ fn run_round(
             (d.mm(), d.deg())
         })
         .collect();
-    for (pose, f) in scene.poses.iter_mut().zip(&video.frames) {
-        *pose = f.pose;
-    }
+    set_poses(scene, video.frames.iter().map(|f| f.pose).collect(), opts);
     let (step_mm, step_deg) = (
         median(steps.iter().map(|s| s.0).collect()),
         median(steps.iter().map(|s| s.1).collect()),
@@ -502,7 +499,6 @@ fn run_round(
         seconds: started.elapsed().as_secs_f64(),
         discarded: false,
     };
-    scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
     Ok((summary, video.frames))
 }
 
