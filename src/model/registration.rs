@@ -74,6 +74,12 @@ pub struct PoseRegistration {
     /// at the given poses it converged on too few frames.
     #[serde(default)]
     pub lambert_lamp: bool,
+    /// The first round was run again from the given poses corrected as each frame's
+    /// neighbours agreed (the median of their corrections,
+    /// [`crate::registration::consensus::consensus_poses`]): from the given poses it converged
+    /// on too few frames.
+    #[serde(default)]
+    pub consensus_start: bool,
     /// Before/after overlays of a few frames, for the reports (not written to model.json).
     #[serde(skip)]
     pub overlays: Vec<PoseOverlay>,
@@ -106,19 +112,41 @@ impl PoseRegistration {
             (true, true) => "The tracking from the first pose",
             (false, _) => "The first round",
         };
-        match (&self.scope_light, self.lambert_lamp) {
-            (Some(source), _) => format!(
+        const AGREED: &str = "it was run again from the given poses corrected as each \
+                              frame's neighbours agreed (the median of their corrections)";
+        let sentence = match (&self.scope_light, self.lambert_lamp, self.consensus_start) {
+            (Some(source), _, false) => format!(
                 "{what} registered against the calibrated light of {source} (the same \
                  bronchoscope), with this video's gains."
             ),
-            (None, true) => format!(
+            (Some(source), _, true) => format!(
+                "{what} registered against the calibrated light of {source} (the same \
+                 bronchoscope), with this video's gains. From the given poses it converged \
+                 on too few frames, and {AGREED}."
+            ),
+            (None, true, false) => format!(
                 "{what} registered against a Lambertian lamp with a uniform beam and this \
                  video's gains: against the light fitted at the poses it started from it \
                  converged on too few frames."
             ),
-            (None, false) => {
+            (None, true, true) => format!(
+                "{what} converged on too few frames against the light fitted at the given \
+                 poses and against a Lambertian lamp; {AGREED}, against a light fitted there."
+            ),
+            (None, false, true) => format!(
+                "{what} converged on too few frames against the light fitted at the given \
+                 poses; {AGREED}, against a light fitted there."
+            ),
+            (None, false, false) => {
                 format!("{what} registered against a light fitted at the poses it started from.")
             }
+        };
+        match self.rounds.iter().all(|r| r.discarded) && !self.rounds.is_empty() {
+            true => format!(
+                "{sentence} It converged on too few frames there too, and the given poses \
+                 were kept."
+            ),
+            false => sentence,
         }
     }
 }

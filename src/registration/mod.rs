@@ -12,6 +12,7 @@ pub mod accuracy;
 pub mod align;
 pub mod blocks;
 pub mod chroma;
+pub mod consensus;
 pub mod frame;
 pub mod level;
 pub mod light;

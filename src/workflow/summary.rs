@@ -106,11 +106,14 @@ fn registration_line(reg: &PoseRegistration) -> String {
             t.seconds_per_frame
         )
     });
-    let first_light = match (&reg.scope_light, reg.lambert_lamp) {
+    let mut first_light = match (&reg.scope_light, reg.lambert_lamp) {
         (Some(source), _) => format!("  registered against the scope light of {source}\n"),
         (None, true) => "  first round run again against a Lambertian lamp (the light fitted at the given poses converged on too few frames)\n".to_string(),
         (None, false) => String::new(),
     };
+    if reg.consensus_start {
+        first_light += "  first round run again from the given poses corrected as each frame's neighbours agreed (from the given poses it converged on too few frames)\n";
+    }
     tracked
         + &first_light
         + &format!(

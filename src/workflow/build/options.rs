@@ -130,6 +130,14 @@ pub struct BuildOptions {
     /// 4 deg: 4 of 30 frames converged against the fitted light, and the build kept the given
     /// poses; BENCHMARKS.md, session 26).
     pub registration_lambert_fallback: bool,
+    /// A first round that still fails (against the scope light, or the fitted light and the
+    /// lamp) is run again from the given poses corrected by the median correction of each
+    /// frame's nearest frames, and again from where that run's frames agree, up to this many
+    /// times (0: never): a tracker's drift is shared by neighbouring frames, and the median
+    /// outvotes the frames that registered to the wrong place (ATM_224 from 4 mm / 5 deg and
+    /// 5 mm / 6 deg: the given poses were kept; now 28 of 30 frames within 1 mm and 1 deg;
+    /// from 6 mm / 7 deg, 9 runs to settle; BENCHMARKS.md, session 27).
+    pub registration_consensus_passes: usize,
     /// Tracking from the first pose (`--poses first`).
     pub tracking: super::tracking::TrackingOptions,
     /// The registration stops when a round moves the median pose less than this (mm) and less
@@ -238,6 +246,7 @@ impl Default for BuildOptions {
             registration_light_samples: 100_000,
             scope_light: None,
             registration_lambert_fallback: true,
+            registration_consensus_passes: 10,
             tracking: Default::default(),
             truth: None,
             force: false,

@@ -21,7 +21,11 @@
 //! round registers against that light's shape instead, with this video's gains. Without one, a
 //! first round that converges on too few frames is run again against a Lambertian lamp with a
 //! uniform beam (`shading::calibrated::lambert_lamp`), with this video's gains: a light that
-//! needs no poses, whose shape is not this scope's.
+//! needs no poses, whose shape is not this scope's. A first round that still fails is run again
+//! from the given poses corrected as each frame's neighbours agree (the median of their
+//! corrections, [`consensus_poses`]), and again from where that run's frames agree, until the
+//! agreement stops moving: from poses 4-6 mm off each frame finds its own wrong minimum, but
+//! the tracker's drift is shared by neighbouring frames, and the median outvotes them.
 //!
 //! Frames that end flagged (a wrong given pose, too few comparable pixels, a cost far above the
 //! video's) are left out of the model, never silently kept: [`PoseRegistration`] says which and
@@ -42,8 +46,9 @@ use crate::io::poses::PoseEntry;
 use crate::math::Affine;
 use crate::model::registration::{FramePoseResult, PoseOverlay, PoseRegistration, RoundSummary};
 use crate::registration::{
-    blocks::BlockOptions, delta_between, register_round, FrameRegistration, FrameStatus,
-    ModelParts, RegistrationOptions, RoundKind, RoundOptions, TrackState, VideoOptions,
+    blocks::BlockOptions, consensus::consensus_poses, delta_between, register_round,
+    FrameRegistration, FrameStatus, ModelParts, RegistrationOptions, RoundKind, RoundOptions,
+    TrackState, VideoOptions, VideoRegistration,
 };
 use crate::render::{MipOptions, MipTexture};
 use crate::shading::calibrated::{
@@ -101,6 +106,7 @@ pub fn register_poses(
         rounds,
         given_score,
         lambert_lamp,
+        consensus_start,
     } = run_rounds(
         scene,
         &view,
@@ -202,6 +208,7 @@ pub fn register_poses(
         tracking,
         scope_light,
         lambert_lamp,
+        consensus_start,
         overlays,
         given,
         poses,
@@ -259,6 +266,8 @@ struct RoundsRun {
     given_score: Option<f64>,
     /// The first round was run again against the Lambertian lamp.
     lambert_lamp: bool,
+    /// The first round was run again from the poses its frames agreed on.
+    consensus_start: bool,
 }
 
 /// Up to `count` rounds of the alternation from the scene's poses (the first, every
@@ -279,6 +288,7 @@ fn run_rounds(
     let mut given_score = None;
     let mut lamp = None;
     let mut lambert_lamp = false;
+    let mut consensus_start = false;
     let every = opts.registration_geometry_every.max(1);
     let mut r = 0;
     let mut repeat_geometry = false;
@@ -317,28 +327,61 @@ fn run_rounds(
             _ => round_light(scene, &later_opts, warnings)?,
         };
         let before = scene.poses.clone();
-        let (mut summary, mut frames_done) = run_round(scene, view, kind, &light, opts, r)?;
+        let (mut summary, mut video) = run_round(scene, view, kind, &light, opts, r)?;
         let mut light = light;
-        let mut converged = frames_done.iter().filter(|f| !flagged(f.status)).count();
         let min_share = opts.registration_min_converged_share;
-        if let Some(l) = lamp
-            .take()
-            .filter(|_| round_failed(converged, frames_done.len(), min_share))
-        {
+        let failed = |v: &VideoRegistration| {
+            let converged = v.frames.iter().filter(|f| !flagged(f.status)).count();
+            round_failed(converged, v.frames.len(), min_share).then_some(converged)
+        };
+        if let Some((l, converged)) = lamp.take().zip(failed(&video)) {
             warnings.push(format!(
                 "registration: round 1 (geometry) converged on {converged} of {} frames against the light fitted at the given poses; it was run again against a Lambertian lamp with this video's gains",
-                frames_done.len()
+                video.frames.len()
             ));
             set_poses(scene, before.clone(), opts);
             summary.discarded = true;
             rounds.push(summary);
-            (summary, frames_done) = run_round(scene, view, kind, &l, opts, r)?;
-            converged = frames_done.iter().filter(|f| !flagged(f.status)).count();
+            (summary, video) = run_round(scene, view, kind, &l, opts, r)?;
             light = l;
             lambert_lamp = true;
         }
+        if let Some(converged) = failed(&video).filter(|_| r == 0) {
+            let agreement = rerun_from_agreement(
+                scene,
+                view,
+                opts,
+                warnings,
+                &before,
+                (&mut summary, &mut video, &mut light),
+                &mut rounds,
+            )?;
+            if agreement.passes > 0 {
+                consensus_start = true;
+                warnings.push(format!(
+                    "registration: round 1 (geometry) converged on {converged} of {} frames{}; it was run again {} from the given poses corrected as each frame's {} nearest frames agreed (the median of their corrections), with {} there, {}",
+                    video.frames.len(),
+                    if lambert_lamp { " against the Lambertian lamp" } else { "" },
+                    match agreement.passes {
+                        1 => "once".to_string(),
+                        n => format!("{n} times"),
+                    },
+                    2 * CONSENSUS_HALF_WINDOW,
+                    match opts.scope_light {
+                        Some(_) => "the scope light's gains measured",
+                        None => "the light fitted",
+                    },
+                    match agreement.settled {
+                        true => "until that agreement settled",
+                        false => "and the agreement had not settled when the runs ran out",
+                    }
+                ));
+            }
+        }
+        let still_failed = failed(&video);
+        let frames_done = video.frames;
         *last_light = Some(light);
-        if round_failed(converged, frames_done.len(), min_share) {
+        if let Some(converged) = still_failed {
             set_poses(scene, before, opts);
             warnings.push(format!(
                 "registration: round {} ({}) converged on {converged} of {} frames; its poses are discarded and the rounds stop there (the poses it started from may be too far off for the photometric registration: check them, or build with --poses fixed)",
@@ -375,6 +418,7 @@ fn run_rounds(
         rounds,
         given_score,
         lambert_lamp,
+        consensus_start,
     })
 }
 
@@ -394,6 +438,105 @@ const LATER_TEXTURE_FROM_ROUND: usize = 2;
 fn set_poses(scene: &mut BuildScene, poses: Vec<Affine>, opts: &BuildOptions) {
     scene.poses = poses;
     scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
+}
+
+/// Frames on each side whose corrections a failed first round's restart takes the median of
+/// (see [`consensus_poses`]): a tracker's drift changes little over seven frames, and three
+/// outliers of seven are outvoted.
+const CONSENSUS_HALF_WINDOW: usize = 3;
+
+/// The runs from the agreement stop when the agreed poses moved less than this from the last
+/// run's (median over the frames; mm and degrees).
+const CONSENSUS_TOLERANCE_MM: f64 = 0.1;
+const CONSENSUS_TOLERANCE_DEG: f64 = 0.1;
+
+/// What [`rerun_from_agreement`] did.
+struct AgreementRuns {
+    /// Runs of the first round from agreed poses.
+    passes: usize,
+    /// The agreed poses stopped moving before the runs ran out.
+    settled: bool,
+}
+
+/// A first round that failed, run again from the poses its frames agree on: the given poses
+/// corrected by the median correction of each frame's nearest frames
+/// ([`consensus_poses`] of where they registered), with the light fitted there (or the scope
+/// light's gains measured there), until the agreed poses stop moving or
+/// `opts.registration_consensus_passes` runs are spent. The round (`summary`, `video`,
+/// `light`) becomes the last run's; every run before it is pushed to `rounds`, discarded.
+/// On ATM_224 from 4 mm / 5 deg the agreement moved 1.0 mm / 2.8 deg, then 0.20 / 0.81, 0.015 /
+/// 0.11 and 0.015 / 0.075 (BENCHMARKS.md, session 27).
+fn rerun_from_agreement(
+    scene: &mut BuildScene,
+    view: &RegistrationView,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+    given: &[Affine],
+    round: (
+        &mut RoundSummary,
+        &mut VideoRegistration,
+        &mut CalibratedModel,
+    ),
+    rounds: &mut Vec<RoundSummary>,
+) -> Result<AgreementRuns> {
+    let (summary, video, light) = round;
+    let mut previous: Option<Vec<Affine>> = None;
+    let mut passes = 0;
+    while passes < opts.registration_consensus_passes {
+        let usable: Vec<bool> = video
+            .frames
+            .iter()
+            .map(|f| reached_a_cost(f.status))
+            .collect();
+        let Some(start) = consensus_poses(given, &video.measured, &usable, CONSENSUS_HALF_WINDOW)
+        else {
+            break;
+        };
+        if let Some(p) = &previous {
+            let (mm, deg) = median_move(p, &start);
+            if mm < CONSENSUS_TOLERANCE_MM && deg < CONSENSUS_TOLERANCE_DEG {
+                return Ok(AgreementRuns {
+                    passes,
+                    settled: true,
+                });
+            }
+        }
+        set_poses(scene, start.clone(), opts);
+        summary.discarded = true;
+        rounds.push(summary.clone());
+        *light = match &opts.scope_light {
+            Some(scope) => {
+                let (_, samples) = fit_pass(scene, opts)?;
+                scope_light_with_gains(scope, &samples.pooled, None)?
+            }
+            None => round_light(scene, opts, warnings)?,
+        };
+        (*summary, *video) = run_round(scene, view, RoundKind::Geometry, light, opts, 0)?;
+        previous = Some(start);
+        passes += 1;
+    }
+    Ok(AgreementRuns {
+        passes,
+        settled: false,
+    })
+}
+
+/// The median over the frames of the move from `a` to `b` (mm, degrees).
+fn median_move(a: &[Affine], b: &[Affine]) -> (f64, f64) {
+    let d: Vec<_> = a.iter().zip(b).map(|(a, b)| delta_between(a, b)).collect();
+    (
+        median(d.iter().map(|d| d.mm()).collect()),
+        median(d.iter().map(|d| d.deg()).collect()),
+    )
+}
+
+/// A frame's registration reached a cost: it converged, or it ended somewhere its neighbours
+/// disagree with. The others were not compared with the model and stayed where they started.
+fn reached_a_cost(status: FrameStatus) -> bool {
+    matches!(
+        status,
+        FrameStatus::Converged | FrameStatus::NotConverged | FrameStatus::Outlier
+    )
 }
 
 /// Whether a round on which `converged` of `frames` frames converged has failed (fewer than
@@ -425,7 +568,7 @@ fn run_round(
     light: &CalibratedModel,
     opts: &BuildOptions,
     round_index: usize,
-) -> Result<(RoundSummary, Vec<FrameRegistration>)> {
+) -> Result<(RoundSummary, VideoRegistration)> {
     let started = Instant::now();
     // A geometry round still needs the texture: the colour–albedo relation it divides
     // the frames by is fitted on it.
@@ -499,7 +642,7 @@ fn run_round(
         seconds: started.elapsed().as_secs_f64(),
         discarded: false,
     };
-    Ok((summary, video.frames))
+    Ok((summary, video))
 }
 
 /// The calibrated light's mean PSNR on held-out frames at the scene's current poses (the
