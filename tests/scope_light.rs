@@ -13,7 +13,7 @@ use bronchosim::registration::pose_error;
 use bronchosim::workflow::build::{
     build_model, register_poses, BuildOptions, BuildScene, PosesMode,
 };
-use bronchosim::workflow::register::register_command;
+use bronchosim::workflow::register::{register_command, RegisterSummary};
 use std::path::Path;
 use std::sync::OnceLock;
 
@@ -192,6 +192,30 @@ fn a_scope_light_with_fixed_poses_is_named_as_unused() {
     );
 }
 
+/// `register` on `case` into `out` with `opts`: its summary and the median errors of the
+/// refined poses (printed with the given poses', the rounds and the warnings).
+fn register_once(case: &Path, out: &Path, opts: &BuildOptions) -> (RegisterSummary, (f64, f64)) {
+    let given = errors(&case.join("poses.json"), case);
+    let s = register_command(case, out, opts).unwrap();
+    let e = errors(&out.join("refined_poses.json"), case);
+    let rounds: Vec<_> = s
+        .registration
+        .rounds
+        .iter()
+        .map(|r| (r.discarded, r.counts.clone()))
+        .collect();
+    println!(
+        "{}: given {:.3} mm {:.3} deg -> {:.3} mm {:.3} deg; rounds {rounds:?}; {:?}",
+        out.display(),
+        given.0,
+        given.1,
+        e.0,
+        e.1,
+        s.warnings
+    );
+    (s, e)
+}
+
 /// Without a scope light, a first round that converges on too few frames against the light
 /// fitted at the given poses is run again against a Lambertian lamp with a uniform beam (a
 /// light that needs no poses) and this video's gains.
@@ -214,19 +238,7 @@ fn a_failed_first_round_is_run_again_against_a_lambertian_lamp() {
             quiet: true,
             ..Default::default()
         };
-        let out = tmp.path().join(format!("lamp_{fallback}"));
-        let s = register_command(&case, &out, &opts).unwrap();
-        let e = errors(&out.join("refined_poses.json"), &case);
-        let rounds: Vec<_> = s
-            .registration
-            .rounds
-            .iter()
-            .map(|r| (r.discarded, r.counts.clone()))
-            .collect();
-        println!(
-            "fallback {fallback}: given {:.3} mm {:.3} deg -> {:.3} mm {:.3} deg; rounds {rounds:?}; {:?}",
-            given.0, given.1, e.0, e.1, s.warnings
-        );
+        let (s, e) = register_once(&case, &tmp.path().join(format!("lamp_{fallback}")), &opts);
         results.push((s, e));
     }
     // Without the fallback the round is discarded and the given poses stay.
@@ -269,18 +281,7 @@ fn a_failed_first_round_is_run_again_from_the_poses_its_frames_agree_on() {
             ..Default::default()
         };
         let out = tmp.path().join(format!("agree_{restart}"));
-        let s = register_command(&case, &out, &opts).unwrap();
-        let e = errors(&out.join("refined_poses.json"), &case);
-        let rounds: Vec<_> = s
-            .registration
-            .rounds
-            .iter()
-            .map(|r| (r.discarded, r.counts.clone()))
-            .collect();
-        println!(
-            "restart {restart}: given {:.3} mm {:.3} deg -> {:.3} mm {:.3} deg; rounds {rounds:?}; {:?}",
-            given.0, given.1, e.0, e.1, s.warnings
-        );
+        let (s, e) = register_once(&case, &out, &opts);
         results.push((s, e, out));
     }
     // Without the runs from the agreement the round is discarded and the given poses stay.
