@@ -2,7 +2,7 @@
 //! neighbouring frames, so where most frames of a round registered to scattered poses (each
 //! to its own local minimum, from poses several millimetres off) the median of the
 //! corrections of a frame's neighbours is still close to its own error: on ATM_224 from
-//! 4 mm / 5 deg, single frames ended 1-6 mm and 2-64 deg off (22 of 30 outliers), and the
+//! 4 mm / 5 deg, single frames ended 0.4-6 mm and 1-65 deg off (22 of 30 outliers), and the
 //! median over each frame's seven nearest brought every frame to 1.3 mm / 3.1 deg, from which
 //! the round converged on 28 of 30 (BENCHMARKS.md, session 27).
 
