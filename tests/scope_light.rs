@@ -153,8 +153,9 @@ fn tracking_from_the_first_pose_in_the_scope_light_keeps_the_view_direction() {
         "tracked {} of 20 (first lost {:?}); within 1 mm {within_mm}, within 1 mm and 1 deg {within_both}; errors {errors:?}",
         tracking.frames_tracked, tracking.first_lost
     );
-    // Measured: all 20 within 1 mm, 19 also within 1 degree (0.11 deg per frame of drift in
-    // the view direction); with the light fitted on the tracked frames 11 (tests/tracking.rs).
+    // Measured: all 20 within 1 mm and 1 degree (0.39 deg median; before each window of
+    // frames was registered again against the geometry, 17 of 20, drifting 0.11 deg per frame
+    // in the view direction); with the light fitted on the tracked frames 10.
     assert_eq!((tracking.frames_tracked, tracking.first_lost), (20, None));
     assert!(within_mm >= 20, "{within_mm} of 20 frames within 1 mm");
     assert!(

@@ -36,11 +36,11 @@ fn poses_first_tracks_the_video_from_one_pose() {
     let tmp = tempfile::tempdir().unwrap();
     let case_dir = tmp.path().join("case");
     // The video without a tracker: poses.json holds the first frame's pose alone.
-    let truth = untracked_phantom(&case_dir, 20);
+    let truth = untracked_phantom(&case_dir, 48);
     let refused = Case::open(&case_dir).unwrap_err().to_string();
     assert!(refused.contains("fewer poses than frames"), "{refused}");
     let opened = Case::open_untracked(&case_dir).unwrap();
-    assert_eq!((opened.frame_count(), opened.poses_given), (20, 1));
+    assert_eq!((opened.frame_count(), opened.poses_given), (48, 1));
 
     let opts = BuildOptions {
         poses: PosesMode::First,
@@ -53,20 +53,22 @@ fn poses_first_tracks_the_video_from_one_pose() {
     let s = register_command(&case_dir, &out, &opts).unwrap();
     let tracking = s.registration.tracking.clone().unwrap();
     let tracked = poses_of(&read_poses(&out.join("poses.json"), &case_dir).unwrap());
-    assert_eq!(tracked.len(), 20);
+    assert_eq!(tracked.len(), 48);
     let (errors, within_mm, within_both) = tracked_errors(&tracked, &truth);
     println!(
-        "tracked {} of 20 (first lost {:?}); within 1 mm {within_mm}, within 1 mm and 1 deg {within_both}; {:.2} s per frame; errors {:?}",
+        "tracked {} of 48 (first lost {:?}); within 1 mm {within_mm}, within 1 mm and 1 deg {within_both}; {:.2} s per frame; errors {:?}",
         tracking.frames_tracked, tracking.first_lost, tracking.seconds_per_frame, errors
     );
-    // Measured: all 20 frames within 1 mm (median 0.12 mm); 11 also within 1 degree (the
-    // view direction drifts about 0.15 degree per frame).
-    assert!(within_mm >= 20, "{within_mm} of 20 frames within 1 mm");
+    // Measured: all 48 frames within 1 mm (median 0.34 mm), 7 also within 1 degree (1.4 deg
+    // median; the registration's rounds refine them in a build). Without each window's
+    // geometry round the view direction drifted with the texture: 25 within 1 mm, the track
+    // lost at frame 32.
+    assert_eq!(within_mm, 48, "{within_mm} of 48 frames within 1 mm");
     assert!(
-        within_both >= 9,
-        "{within_both} of 20 frames within 1 mm and 1 degree"
+        within_both >= 5,
+        "{within_both} of 48 frames within 1 mm and 1 degree"
     );
-    assert_eq!((tracking.frames_tracked, tracking.first_lost), (20, None));
+    assert_eq!((tracking.frames_tracked, tracking.first_lost), (48, None));
     let record = std::fs::read_to_string(out.join("registration.json")).unwrap();
     assert!(record.contains("\"frames_tracked\""), "{record}");
 }
