@@ -504,13 +504,7 @@ fn rerun_from_agreement(
         set_poses(scene, start.clone(), opts);
         summary.discarded = true;
         rounds.push(summary.clone());
-        *light = match &opts.scope_light {
-            Some(scope) => {
-                let (_, samples) = fit_pass(scene, opts)?;
-                scope_light_with_gains(scope, &samples.pooled, None)?
-            }
-            None => round_light(scene, opts, warnings)?,
-        };
+        *light = registration_light(scene, opts, warnings)?;
         (*summary, *video) = run_round(scene, view, RoundKind::Geometry, light, opts, 0)?;
         previous = Some(start);
         passes += 1;
@@ -701,7 +695,7 @@ fn first_light(
 
 /// `scope`'s light with the gains of the frames of `samples` ([`with_video_gains`]; the
 /// reference frame `reference` or the median one).
-pub(super) fn scope_light_with_gains(
+fn scope_light_with_gains(
     scope: &ScopeLight,
     samples: &PooledSamples,
     reference: Option<usize>,
@@ -713,6 +707,24 @@ pub(super) fn scope_light_with_gains(
         ))
         .into()
     })
+}
+
+/// The light to register against at the scene's current poses: the scope's
+/// (`opts.scope_light`) with the frames' gains measured there (`opts.calibrated_reference`
+/// the frame whose gain is 1, else the median one), or one fitted there ([`round_light`]).
+/// The scope's light needs only the frames' gains, which a few frames fix as well as many.
+pub(super) fn registration_light(
+    scene: &mut BuildScene,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+) -> Result<CalibratedModel> {
+    match &opts.scope_light {
+        Some(scope) => {
+            let (_, samples) = fit_pass(scene, opts)?;
+            scope_light_with_gains(scope, &samples.pooled, opts.calibrated_reference)
+        }
+        None => round_light(scene, opts, warnings),
+    }
 }
 
 /// The calibrated light fitted with the scene's current poses (a first pass and the pooled

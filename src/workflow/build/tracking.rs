@@ -7,11 +7,8 @@
 //! (`BuildOptions::scope_light`) only the frames' gains are fitted, in that light. The
 //! registration's rounds then refine the tracked poses (`refine_after`).
 
-use super::fit_pass::fit_pass;
 use super::options::BuildOptions;
-use super::registration::{
-    consensus_texture, round_light, scope_light_with_gains, RegistrationView,
-};
+use super::registration::{consensus_texture, registration_light, round_light, RegistrationView};
 use super::scene::BuildScene;
 use crate::camera::Camera;
 use crate::math::Affine;
@@ -99,15 +96,9 @@ fn fit_model(
         ..opts.clone()
     };
     on_frames(scene, fit_on, opts, |s| {
-        let light = match &opts.scope_light {
-            // The scope's light needs only the frames' gains, which a few frames fix as well
-            // as many; a light fitted on the first frames sees few distances and angles.
-            Some(scope) => {
-                let (_, samples) = fit_pass(s, &fit_opts)?;
-                scope_light_with_gains(scope, &samples.pooled, Some(fit_on.len() - 1))?
-            }
-            None => round_light(s, &fit_opts, warnings)?,
-        };
+        // With a scope, only the frames' gains are fitted: a light fitted on the first
+        // frames sees few distances and angles.
+        let light = registration_light(s, &fit_opts, warnings)?;
         let texture = consensus_texture(s, &light, &fit_opts)?;
         Ok((light, texture))
     })
