@@ -13,7 +13,7 @@ use std::path::Path;
 
 #[path = "common/untracked.rs"]
 mod untracked;
-use untracked::{tracked_errors, untracked_phantom};
+use untracked::{tracked_errors, untracked_phantom, untracked_phantom_jitter};
 
 fn phantom(dir: &Path, noise: PoseNoise) -> Case {
     let opts = PhantomOptions {
@@ -71,6 +71,47 @@ fn poses_first_tracks_the_video_from_one_pose() {
     assert_eq!((tracking.frames_tracked, tracking.first_lost), (48, None));
     let record = std::fs::read_to_string(out.join("registration.json")).unwrap();
     assert!(record.contains("\"frames_tracked\""), "{record}");
+}
+
+#[test]
+fn a_lost_track_resumes_from_the_frames_before_it_refined() {
+    let tmp = tempfile::tempdir().unwrap();
+    let case_dir = tmp.path().join("case");
+    // The view direction swings up to 12 degrees (the built-in path's 4): the scope turns up
+    // to 10 degrees between frames, as on the real airway tree where the track was lost.
+    let truth = untracked_phantom_jitter(&case_dir, 32, 12.0);
+    let opts = BuildOptions {
+        poses: PosesMode::First,
+        registration_rounds: 0,
+        cross_validate_every: 0,
+        quiet: true,
+        ..Default::default()
+    };
+    let out = tmp.path().join("reg");
+    let s = register_command(&case_dir, &out, &opts).unwrap();
+    let tracked = poses_of(&read_poses(&out.join("poses.json"), &case_dir).unwrap());
+    let (errors, within_mm, _) = tracked_errors(&tracked, &truth);
+    let t = s.registration.tracking.clone().unwrap();
+    println!(
+        "tracked {}, lost at {:?}, resumed at {:?}; {within_mm} of 32 within 1 mm; errors {errors:?}",
+        t.frames_tracked, t.first_lost, t.resumed_at
+    );
+    // Measured (36 frames): the track is lost at frame 15 (`TrackingOptions::resumes` 0: 15
+    // frames within 1 mm, none after it); resumed there, frames 15-30 are within 1 mm.
+    let Some(&resumed_at) = t.resumed_at.first() else {
+        panic!("the track was never lost: no sharp turn to resume after ({t:?})");
+    };
+    let after = errors[resumed_at..].iter().filter(|e| e.0 <= 1.0).count();
+    assert!(
+        after >= 10,
+        "{after} of the {} frames from the resume at {resumed_at} within 1 mm",
+        32 - resumed_at
+    );
+    assert_eq!(
+        errors[0],
+        (0.0, 0.0),
+        "the first frame's given pose is kept"
+    );
 }
 
 #[test]

@@ -161,6 +161,10 @@ pub struct TrackingSummary {
     /// The first frame of the first run of flagged frames after which the track was lost
     /// (`None`: never lost).
     pub first_lost: Option<usize>,
+    /// The frames tracking resumed at after it was lost there, each time from the frames
+    /// before refined by the registration's rounds.
+    #[serde(default)]
+    pub resumed_at: Vec<usize>,
     /// Fits of the light and texture the frames were tracked against.
     pub light_fits: usize,
     /// Wall time of the tracking (s).

@@ -106,6 +106,29 @@ impl TrackState {
         }
     }
 
+    /// Track again from frame `f` on, the frames before it at `poses` (refined since they
+    /// were tracked): the frames from `f` on are untracked again and the track not lost.
+    pub fn resume_at(&mut self, f: usize, poses: &[Affine]) {
+        self.poses[..f].copy_from_slice(&poses[..f]);
+        let gain = self.gains[self.accepted_before(f).last().copied().unwrap_or(0)];
+        for i in f..self.poses.len() {
+            self.poses[i] = poses[f - 1];
+            self.gains[i] = gain;
+            self.status[i] = None;
+            self.accepted[i] = false;
+            self.costs[i] = f64::NAN;
+        }
+        self.first_lost = None;
+        self.flagged_in_row = 0;
+    }
+
+    /// The first frame not tracked yet (the video's length when every frame was).
+    pub fn next_untracked(&self) -> usize {
+        (1..self.poses.len())
+            .find(|&i| self.status[i].is_none())
+            .unwrap_or(self.poses.len())
+    }
+
     /// The accepted frames before `f`, in order.
     pub fn accepted_before(&self, f: usize) -> Vec<usize> {
         (0..f).filter(|&i| self.accepted[i]).collect()

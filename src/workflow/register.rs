@@ -204,9 +204,21 @@ pub(crate) fn pose_truth_html(t: &PoseTruth) -> String {
 
 /// One paragraph on the tracking from the first pose (`--poses first`).
 pub(crate) fn tracking_html(t: &TrackingSummary) -> String {
+    let resumed = match t.resumed_at.as_slice() {
+        [] => String::new(),
+        r => format!(
+            "it was lost and resumed at frame{} {} (the frames before refined by the rounds); ",
+            if r.len() > 1 { "s" } else { "" },
+            r.iter()
+                .map(|f| f.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    };
     let lost = match t.first_lost {
-        Some(f) => format!("the track was lost at frame {f}"),
-        None => "the track was never lost".to_string(),
+        Some(f) => format!("{resumed}the track was lost at frame {f}"),
+        None if resumed.is_empty() => "the track was never lost".to_string(),
+        None => format!("{resumed}it then held to the end"),
     };
     format!(
         "<p>Tracked from the first frame's pose alone: {} of {} frames accepted; {lost};          {} fits of the light; {:.2} s per frame. The corrections below are from the tracked          poses.</p>",

@@ -101,8 +101,14 @@ fn registration_line(reg: &PoseRegistration) -> String {
             "  tracked from the first pose: {} of {} frames, {}, {:.2} s per frame\n",
             t.frames_tracked,
             t.frames,
-            t.first_lost
-                .map_or("never lost".to_string(), |f| format!("lost at frame {f}")),
+            match (t.first_lost, t.resumed_at.is_empty()) {
+                (Some(f), _) => format!("lost at frame {f}"),
+                (None, true) => "never lost".to_string(),
+                (None, false) => "held to the end".to_string(),
+            } + &match t.resumed_at.as_slice() {
+                [] => String::new(),
+                r => format!(" (resumed at frames {r:?})"),
+            },
             t.seconds_per_frame
         )
     });

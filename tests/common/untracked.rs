@@ -6,17 +6,26 @@
 use bronchosim::io::case::Case;
 use bronchosim::io::poses::{write_poses, FrameRef};
 use bronchosim::math::Affine;
+use bronchosim::phantom::path::PathOptions;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use std::path::Path;
 
 /// Write the case into `case_dir` with its first `kept` frames (128x128); returns their true
 /// poses.
 pub fn untracked_phantom(case_dir: &Path, kept: usize) -> Vec<Affine> {
+    untracked_phantom_jitter(case_dir, kept, PathOptions::default().jitter_deg)
+}
+
+pub fn untracked_phantom_jitter(case_dir: &Path, kept: usize, jitter_deg: f64) -> Vec<Affine> {
     let opts = PhantomOptions {
         frames: 80,
         width: 128,
         height: 128,
         novel_views: 1,
+        path: PathOptions {
+            jitter_deg,
+            ..Default::default()
+        },
         ..Default::default()
     };
     write_phantom_case(case_dir, &opts).unwrap();

@@ -102,33 +102,29 @@ pub fn register_poses(
         true if !opts.tracking.refine_after => 0,
         _ => opts.registration_rounds,
     };
-    let RoundsRun {
-        rounds,
-        given_score,
-        lambert_lamp,
-        consensus_start,
-    } = run_rounds(
+    // The rounds refine the frames the tracker kept: a frame it lost sits at a predicted pose,
+    // often outside the lumen, and is left out of the model anyway. On a real airway tree
+    // (ATM_224) whose track was lost at frame 40 of 80, the rounds over all 80 frames failed
+    // (5 converged) and refined none; over the 40 tracked frames they converged on all 40.
+    let rounds_on: Vec<usize> = (0..scene.frame_count())
+        .filter(|&i| statuses.get(i).is_none_or(|s| !s.1))
+        .collect();
+    let (run, refined_score) = rounds_on_frames(
         scene,
         &view,
+        &rounds_on,
         rounds_to_run,
         opts,
         warnings,
         &mut statuses,
         &mut last_light,
     )?;
-    // Keep the refined poses only when they predict held-out frames clearly better than the
-    // given ones (the same test, with the same held-out frames, as the shading model's
-    // choice; `registration_keep_margin_db` says why clearly).
-    let refined_score = match given_score {
-        Some(_) => {
-            // Refitted at the final poses, as the given poses' light was at theirs: the last
-            // round's light (fitted a round or two earlier) saves 3.9 s but scored the refined
-            // poses of the ATM_305 case 0.25 dB lower.
-            let light = round_light(scene, opts, warnings)?;
-            held_out_psnr(scene, &light, opts)?
-        }
-        None => None,
-    };
+    let RoundsRun {
+        rounds,
+        given_score,
+        lambert_lamp,
+        consensus_start,
+    } = run;
     let margin = opts.registration_keep_margin_db;
     let kept_given = matches!((given_score, refined_score), (Some(g), Some(r)) if r <= g + margin);
     let registered = scene.poses.clone();
@@ -216,6 +212,74 @@ pub fn register_poses(
     }))
 }
 
+/// Up to `count` rounds ([`run_rounds`]) on the frames `on` of the scene (increasing; all of
+/// them when fewer than two), the others left where they are, and the held-out PSNR at the
+/// refined poses when the rounds scored the poses they started from. `statuses` (every
+/// frame's, or empty) takes the rounds' statuses of the frames `on`.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn rounds_on_frames(
+    scene: &mut BuildScene,
+    view: &RegistrationView,
+    on: &[usize],
+    count: usize,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+    statuses: &mut Vec<(String, bool)>,
+    last_light: &mut Option<CalibratedModel>,
+) -> Result<(RoundsRun, Option<f64>)> {
+    let n = scene.frame_count();
+    let on: Vec<usize> = match on.len() {
+        0 | 1 => (0..n).collect(),
+        _ => on.to_vec(),
+    };
+    let subset_view;
+    let view = match on.len() == n {
+        true => view,
+        false => {
+            subset_view = view.subset(&on);
+            &subset_view
+        }
+    };
+    let mut on_statuses: Vec<_> = match statuses.is_empty() {
+        true => Vec::new(),
+        false => on.iter().map(|&i| statuses[i].clone()).collect(),
+    };
+    let out = scene.on_frames(&on, opts.depth_cache_bytes, |scene| {
+        let run = run_rounds(
+            scene,
+            view,
+            count,
+            opts,
+            warnings,
+            &mut on_statuses,
+            last_light,
+        )?;
+        // Keep the refined poses only when they predict held-out frames clearly better than
+        // the given ones (the same test, with the same held-out frames, as the shading
+        // model's choice; `registration_keep_margin_db` says why clearly).
+        let refined_score = match run.given_score {
+            Some(_) => {
+                // Refitted at the final poses, as the given poses' light was at theirs: the
+                // last round's light (fitted a round or two earlier) saves 3.9 s but scored
+                // the refined poses of the ATM_305 case 0.25 dB lower.
+                let light = round_light(scene, opts, warnings)?;
+                held_out_psnr(scene, &light, opts)?
+            }
+            None => None,
+        };
+        Ok::<_, crate::Error>((run, refined_score))
+    })?;
+    match statuses.is_empty() {
+        true => *statuses = on_statuses,
+        false => {
+            for (&i, s) in on.iter().zip(on_statuses) {
+                statuses[i] = s;
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// The resolution frames are registered at: the working one, reduced further to at most
 /// 400 pixels across. The registration's finest grid has ~80 points across (measured on the
 /// 320-pixel demo), so more pixels add nothing but memory: every frame is held in memory for
@@ -256,12 +320,21 @@ impl RegistrationView {
             mask,
         })
     }
+
+    /// The view of the frames `keep` (indices into these).
+    fn subset(&self, keep: &[usize]) -> RegistrationView {
+        RegistrationView {
+            frames: keep.iter().map(|&i| self.frames[i].clone()).collect(),
+            camera: self.camera,
+            mask: self.mask.clone(),
+        }
+    }
 }
 
 /// What [`run_rounds`] did.
-struct RoundsRun {
+pub(super) struct RoundsRun {
     /// The rounds, discarded ones included.
-    rounds: Vec<RoundSummary>,
+    pub(super) rounds: Vec<RoundSummary>,
     /// The held-out PSNR at the poses the rounds started from.
     given_score: Option<f64>,
     /// The first round was run again against the Lambertian lamp.

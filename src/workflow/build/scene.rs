@@ -196,6 +196,29 @@ impl BuildScene {
         self.cache = DepthCache::new(self.poses.len(), cache_bytes, self.level);
     }
 
+    /// Run `f` on the scene reduced to the frames `keep` (increasing indices), then restore
+    /// every frame: the kept frames at the poses `f` left them at, the others where they were.
+    /// The depth cache starts empty after it.
+    pub fn on_frames<T>(
+        &mut self,
+        keep: &[usize],
+        cache_bytes: usize,
+        f: impl FnOnce(&mut BuildScene) -> T,
+    ) -> T {
+        let (case_poses, mut poses) = (self.case.poses.clone(), self.poses.clone());
+        let numbers = self.frame_numbers.clone();
+        self.keep_frames(keep, cache_bytes);
+        let out = f(self);
+        for (&i, p) in keep.iter().zip(&self.poses) {
+            poses[i] = *p;
+        }
+        self.case.poses = case_poses;
+        self.poses = poses;
+        self.frame_numbers = numbers;
+        self.cache = DepthCache::new(self.poses.len(), cache_bytes, self.level);
+        out
+    }
+
     /// Number of frames.
     pub fn frame_count(&self) -> usize {
         self.poses.len()
