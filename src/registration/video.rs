@@ -45,6 +45,9 @@ pub struct VideoOptions {
     /// (the default): never; a video registered straight from a tracker's poses has no run to
     /// trust yet.
     pub blocks: Option<BlockOptions>,
+    /// Frames whose given pose is exact (the trusted first frame of a video registered
+    /// without a tracker): kept there, and the drift pinned at them.
+    pub anchored: Vec<usize>,
 }
 
 impl Default for VideoOptions {
@@ -58,6 +61,7 @@ impl Default for VideoOptions {
             frame_numbers: Vec::new(),
             progress: None,
             blocks: None,
+            anchored: Vec::new(),
         }
     }
 }
@@ -288,15 +292,32 @@ pub fn refine_video(
             restarted[f] = true;
         }
     }
+    for &f in opts.anchored.iter().filter(|&&f| f < n) {
+        res[f].pose = poses[f];
+        res[f].correction = PoseDelta::default();
+    }
     // Flags: frames that never converged, and frames whose correction departs from their
     // neighbours'.
     let g = gate(&res);
     let ok: Vec<bool> = res.iter().map(|r| good(r, g)).collect();
     let deltas: Vec<PoseDelta> = res.iter().map(|r| r.correction).collect();
     flag_failures(&mut res, &ok, &deltas, poses, opts);
+    let mut anchored = vec![false; n];
+    for &f in opts.anchored.iter().filter(|&&f| f < n) {
+        anchored[f] = true;
+        res[f].status = FrameStatus::Converged;
+    }
     let measured: Vec<Affine> = res.iter().map(|r| r.pose).collect();
     let noise = match &opts.smooth {
-        Some(prior) => smooth(&mut res, &ok, &deltas, poses, &opts.frame_numbers, prior),
+        Some(prior) => smooth(
+            &mut res,
+            &ok,
+            &anchored,
+            &deltas,
+            poses,
+            &opts.frame_numbers,
+            prior,
+        ),
         None => [0.0; 6],
     };
     let mut counts = BTreeMap::new();
@@ -319,17 +340,26 @@ pub fn refine_video(
 fn smooth(
     res: &mut [FrameRegistration],
     ok: &[bool],
+    anchored: &[bool],
     deltas: &[PoseDelta],
     poses: &[Affine],
     frame_numbers: &[usize],
     prior: &DriftPrior,
 ) -> [f64; 6] {
     let usable: Vec<bool> = (0..res.len())
-        .map(|f| ok[f] && res[f].status != FrameStatus::Outlier)
+        .map(|f| anchored[f] || ok[f] && res[f].status != FrameStatus::Outlier)
         .collect();
     let rot: Vec<_> = res.iter().map(|r| rotation_of(&r.pose)).collect();
     let information: Vec<_> = res.iter().map(|r| r.information).collect();
-    let s = smooth_corrections(deltas, &rot, &information, &usable, frame_numbers, prior);
+    let s = smooth_corrections(
+        deltas,
+        &rot,
+        &information,
+        &usable,
+        anchored,
+        frame_numbers,
+        prior,
+    );
     for (f, d) in s.corrections.iter().enumerate() {
         res[f].pose = apply_delta(&poses[f], d);
         res[f].correction = *d;

@@ -513,6 +513,15 @@ fn set_poses(scene: &mut BuildScene, poses: Vec<Affine>, opts: &BuildOptions) {
     scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
 }
 
+/// The frames whose given pose is exact: without a tracker (`--poses first`), the first
+/// frame of the video, when it is among the scene's.
+fn anchored_frames(scene: &BuildScene, opts: &BuildOptions) -> Vec<usize> {
+    match (opts.poses, scene.frame_numbers.first()) {
+        (PosesMode::First, Some(0)) => vec![0],
+        _ => Vec::new(),
+    }
+}
+
 /// Frames on each side whose corrections a failed first round's restart takes the median of
 /// (see [`consensus_poses`]): a tracker's drift changes little over seven frames, and three
 /// outliers of seven are outvoted.
@@ -674,6 +683,7 @@ fn run_round(
                 // 3 mm / 4 deg: realigning from the first round 25.87 dB new views, from the
                 // second 29.43 dB, never 26.85 dB; BENCHMARKS.md).
                 blocks: (round_index > 0).then(BlockOptions::default),
+                anchored: anchored_frames(scene, opts),
                 ..VideoOptions::default()
             },
             frame,
