@@ -35,10 +35,10 @@ pub struct TrackingOptions {
     /// The per-frame tracking.
     pub track: TrackOptions,
     /// Run the registration's rounds from the tracked poses (off: the tracked poses are the
-    /// model's). Measured on the demo phantom (BENCHMARKS.md, "Tracking", session 28): from
-    /// poses tracked to 0.33 mm / 1.41 deg median the rounds end at 0.106 mm / 0.270 deg, new
-    /// views 30.32 dB (a tracker 1.5 mm / 2 deg off: 30.54 dB); the tracked poses alone (the
-    /// window's roll kept) scored 28.17 dB.
+    /// model's). Measured on the demo phantom (BENCHMARKS.md, sessions 28 and 29): from poses
+    /// tracked to 0.33 mm / 1.41 deg median the rounds, the first frame anchored, end at
+    /// 0.095 mm / 0.223 deg, new views 30.75 dB (a tracker 1.5 mm / 2 deg off: 30.54 dB); the
+    /// tracked poses alone (the window's roll kept) scored 28.17 dB.
     pub refine_after: bool,
     /// Before each fit of the light, the last this many accepted frames (the trusted first
     /// frame aside) are registered again against the geometry's shading alone, as one
@@ -51,7 +51,8 @@ pub struct TrackingOptions {
     /// before the loss are refined by the registration's rounds, and the lost frames are
     /// tracked again from them (0: the track stays lost). On a real airway tree (ATM_224,
     /// 2 mm and up to 13 deg between frames) the track was lost at frame 40 with its frames
-    /// within 0.55 mm / 1.8 deg; refined, they were within 0.32 mm / 0.75 deg.
+    /// within 0.55 mm / 1.8 deg; refined, they were within 0.32 mm / 0.75 deg, and the track
+    /// resumed from them held to frame 79 (BENCHMARKS.md, session 29).
     pub resumes: usize,
     /// Accepted frames refined before the tracking resumes.
     pub resume_frames: usize,
