@@ -4,6 +4,7 @@
 use bronchosim::io::case::Case;
 use bronchosim::io::poses::{read_poses, PoseEntry};
 use bronchosim::math::Affine;
+use bronchosim::model::registration::TrackingSummary;
 use bronchosim::phantom::pose_noise::PoseNoise;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::registration::pose_error;
@@ -31,6 +32,21 @@ fn poses_of(entries: &[PoseEntry]) -> Vec<Affine> {
     entries.iter().map(|p| p.pose.camera_to_world).collect()
 }
 
+/// `register CASE --out OUT --poses first --rounds 0`: the tracking alone; its summary and the
+/// tracked poses.
+fn track_only(case_dir: &Path, out: &Path) -> (TrackingSummary, Vec<Affine>) {
+    let opts = BuildOptions {
+        poses: PosesMode::First,
+        registration_rounds: 0,
+        cross_validate_every: 0,
+        quiet: true,
+        ..Default::default()
+    };
+    let s = register_command(case_dir, out, &opts).unwrap();
+    let tracked = poses_of(&read_poses(&out.join("poses.json"), case_dir).unwrap());
+    (s.registration.tracking.clone().unwrap(), tracked)
+}
+
 #[test]
 fn poses_first_tracks_the_video_from_one_pose() {
     let tmp = tempfile::tempdir().unwrap();
@@ -42,17 +58,8 @@ fn poses_first_tracks_the_video_from_one_pose() {
     let opened = Case::open_untracked(&case_dir).unwrap();
     assert_eq!((opened.frame_count(), opened.poses_given), (48, 1));
 
-    let opts = BuildOptions {
-        poses: PosesMode::First,
-        registration_rounds: 0,
-        cross_validate_every: 0,
-        quiet: true,
-        ..Default::default()
-    };
     let out = tmp.path().join("reg");
-    let s = register_command(&case_dir, &out, &opts).unwrap();
-    let tracking = s.registration.tracking.clone().unwrap();
-    let tracked = poses_of(&read_poses(&out.join("poses.json"), &case_dir).unwrap());
+    let (tracking, tracked) = track_only(&case_dir, &out);
     assert_eq!(tracked.len(), 48);
     let (errors, within_mm, within_both) = tracked_errors(&tracked, &truth);
     println!(
@@ -80,18 +87,8 @@ fn a_lost_track_resumes_from_the_frames_before_it_refined() {
     // The view direction swings up to 12 degrees (the built-in path's 4): the scope turns up
     // to 10 degrees between frames, as on the real airway tree where the track was lost.
     let truth = untracked_phantom_jitter(&case_dir, 22, 12.0);
-    let opts = BuildOptions {
-        poses: PosesMode::First,
-        registration_rounds: 0,
-        cross_validate_every: 0,
-        quiet: true,
-        ..Default::default()
-    };
-    let out = tmp.path().join("reg");
-    let s = register_command(&case_dir, &out, &opts).unwrap();
-    let tracked = poses_of(&read_poses(&out.join("poses.json"), &case_dir).unwrap());
+    let (t, tracked) = track_only(&case_dir, &tmp.path().join("reg"));
     let (errors, within_mm, _) = tracked_errors(&tracked, &truth);
-    let t = s.registration.tracking.clone().unwrap();
     println!(
         "tracked {}, lost at {:?}, resumed at {:?}; {within_mm} of 22 within 1 mm; errors {errors:?}",
         t.frames_tracked, t.first_lost, t.resumed_at

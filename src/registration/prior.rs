@@ -348,6 +348,19 @@ mod tests {
         (sum / a.len() as f64).sqrt()
     }
 
+    /// `truth` measured with `deg` degrees RMS of noise on the roll of a camera looking along
+    /// world +x (about world x), nothing elsewhere.
+    fn with_roll_noise(truth: &[PoseDelta], deg: f64, rng: &mut Pcg32) -> Vec<PoseDelta> {
+        truth
+            .iter()
+            .map(|d| PoseDelta {
+                rotation: d.rotation
+                    + Vector3::new(1.0, 0.0, 0.0) * deg.to_radians() * rng.normal(),
+                ..*d
+            })
+            .collect()
+    }
+
     #[test]
     fn noisy_roll_is_smoothed_and_precise_axes_are_kept() {
         // 120 frames looking along world +x (camera z = world x), a smooth drift plus jitter as
@@ -367,14 +380,7 @@ mod tests {
                 }
             })
             .collect();
-        let measured: Vec<PoseDelta> = truth
-            .iter()
-            .map(|d| PoseDelta {
-                rotation: d.rotation
-                    + Vector3::new(1.0, 0.0, 0.0) * 2f64.to_radians() * rng.normal(),
-                ..*d
-            })
-            .collect();
+        let measured = with_roll_noise(&truth, 2.0, &mut rng);
         let s = smooth_corrections(
             &measured,
             &vec![r; n],
@@ -424,14 +430,7 @@ mod tests {
                 }
             })
             .collect();
-        let measured: Vec<PoseDelta> = truth
-            .iter()
-            .map(|d| PoseDelta {
-                rotation: d.rotation
-                    + Vector3::new(1.0, 0.0, 0.0) * 2f64.to_radians() * rng.normal(),
-                ..*d
-            })
-            .collect();
+        let measured = with_roll_noise(&truth, 2.0, &mut rng);
         let prior = DriftPrior {
             noise: MeasurementNoise::PerAxis,
             ..DriftPrior::default()
