@@ -949,7 +949,35 @@ fn round3(x: f64) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use super::round_failed;
+    use super::{round_failed, tracked_statuses};
+    use crate::math::Affine;
+    use crate::registration::{FrameStatus, TrackState};
+
+    #[test]
+    fn frames_accepted_after_the_track_was_lost_are_flagged() {
+        // Frames 1-2 tracked, 3-5 flagged (the track lost at 3), 6 accepted again from poses
+        // extrapolated past the loss.
+        let mut state = TrackState::new(7, Affine::identity(), 1.0);
+        for f in 1..7 {
+            let ok = !(3..6).contains(&f);
+            state.accepted[f] = ok;
+            state.status[f] = Some(match ok {
+                true => FrameStatus::Converged,
+                false => FrameStatus::Outlier,
+            });
+        }
+        state.first_lost = Some(3);
+        let statuses = tracked_statuses(&state);
+        let flagged: Vec<bool> = statuses.iter().map(|s| s.1).collect();
+        assert_eq!(
+            flagged,
+            [false, false, false, true, true, true, true],
+            "{statuses:?}"
+        );
+        assert_eq!(statuses[0].0, "given");
+        assert_eq!(statuses[6].0, "track_lost");
+        assert_eq!(statuses[3].0, "outlier");
+    }
 
     #[test]
     fn a_round_that_converged_on_few_frames_has_failed() {
