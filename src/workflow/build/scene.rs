@@ -198,13 +198,17 @@ impl BuildScene {
 
     /// Run `f` on the scene reduced to the frames `keep` (increasing indices), then restore
     /// every frame: the kept frames at the poses `f` left them at, the others where they were.
-    /// The depth cache starts empty after it.
+    /// The depth cache starts empty after it, unless `keep` is every frame (then `f` runs on
+    /// the scene as it is, and what it cached stays).
     pub fn on_frames<T>(
         &mut self,
         keep: &[usize],
         cache_bytes: usize,
         f: impl FnOnce(&mut BuildScene) -> T,
     ) -> T {
+        if keep.len() == self.frame_count() {
+            return f(self);
+        }
         let (case_poses, mut poses) = (self.case.poses.clone(), self.poses.clone());
         let numbers = self.frame_numbers.clone();
         self.keep_frames(keep, cache_bytes);
