@@ -143,6 +143,73 @@ fn max_frames_zero_builds_the_same_model_as_a_budget_above_the_frames() {
     assert_eq!(budget["counts"]["frames"], 8);
 }
 
+#[test]
+fn a_tracked_video_over_the_budget_is_registered_and_reported_on_its_chosen_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    ok(&run(
+        &[
+            "phantom",
+            "--out",
+            "case",
+            "--frames",
+            "48",
+            "--size",
+            "96x96",
+            "--pose-noise-mm",
+            "1.5",
+            "--pose-noise-deg",
+            "2",
+            "--quiet",
+        ],
+        dir,
+    ));
+    ok(&run(
+        &[
+            "build",
+            "case",
+            "--out",
+            "m",
+            "--quiet",
+            "--max-frames",
+            "16",
+            "--cross-validate-every",
+            "0",
+        ],
+        dir,
+    ));
+    let model: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("m/model.json")).unwrap()).unwrap();
+    let used: Vec<u64> = model["frame_selection"]["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|f| f["used"] == true)
+        .map(|f| f["frame"].as_u64().unwrap())
+        .collect();
+    assert_eq!(used.len(), 16);
+    let registered: Vec<u64> = model["registration"]["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["frame"].as_u64().unwrap())
+        .collect();
+    assert_eq!(registered, used);
+    // The report's before/after overlays name frames of the video the build used. (They were
+    // looked up by their number in the video among the chosen frames: a build whose largest
+    // correction was on a frame numbered past the budget panicked.)
+    let report = std::fs::read_to_string(dir.join("m/report.html")).unwrap();
+    let shown: Vec<u64> = report
+        .split("<tr><td>")
+        .skip(1)
+        .filter(|row| row.contains(" correction: "))
+        .map(|row| row.split(' ').next().unwrap().parse().unwrap())
+        .collect();
+    println!("used {used:?}, overlays of {shown:?}");
+    assert!(shown.len() >= 3, "{shown:?}");
+    assert!(shown.iter().all(|f| used.contains(f)), "{shown:?}");
+}
+
 /// `a` and `b` have the same structure and numbers within 1e-9 (relative).
 fn assert_close(a: &serde_json::Value, b: &serde_json::Value, at: &str) {
     use serde_json::Value;

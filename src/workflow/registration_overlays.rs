@@ -20,34 +20,39 @@ use crate::registration::pose::rotation_of;
 use crate::registration::ModelParts;
 use crate::{Error, Result};
 
-/// Frames to show: the `largest` used frames the registration moved with the largest corrections (mm), then the one
-/// with the median correction; each with why it was chosen.
+/// Frames to show: the `largest` used frames the registration moved with the largest
+/// corrections (mm), then the one with the median correction; each as its index in `frames`
+/// (not its number in the video: the build may use only some of the video's frames), with why
+/// it was chosen.
 pub fn choose_overlay_frames(
     frames: &[FramePoseResult],
     largest: usize,
 ) -> Vec<(usize, &'static str)> {
     // A frame the registration did not move has nothing to show.
-    let mut used: Vec<&FramePoseResult> = frames
-        .iter()
-        .filter(|f| f.used && (f.correction_mm > 0.0 || f.correction_deg > 0.0))
+    let mut used: Vec<usize> = (0..frames.len())
+        .filter(|&i| {
+            let f = &frames[i];
+            f.used && (f.correction_mm > 0.0 || f.correction_deg > 0.0)
+        })
         .collect();
-    used.sort_by(|a, b| b.correction_mm.total_cmp(&a.correction_mm));
+    used.sort_by(|&a, &b| frames[b].correction_mm.total_cmp(&frames[a].correction_mm));
     let mut out: Vec<(usize, &'static str)> = used
         .iter()
         .take(largest)
-        .map(|f| (f.frame, "large correction"))
+        .map(|&i| (i, "large correction"))
         .collect();
-    if let Some(m) = used.get(used.len() / 2) {
-        if out.iter().all(|o| o.0 != m.frame) {
-            out.push((m.frame, "typical correction"));
+    if let Some(&m) = used.get(used.len() / 2) {
+        if out.iter().all(|o| o.0 != m) {
+            out.push((m, "typical correction"));
         }
     }
     out
 }
 
-/// The overlays of `chosen` frames (`frames[f]` linear RGB, `given[f]` and `registered[f]`
-/// camera → world) on the model `parts` (its texture is not used), at most `max_width`
-/// pixels wide (the camera's size halved until it fits).
+/// The overlays of `chosen` frames (indices `f`: `frames[f]` linear RGB, `given[f]` and
+/// `registered[f]` camera → world, `frame_results[f]` its registration) on the model `parts`
+/// (its texture is not used), at most `max_width` pixels wide (the camera's size halved until
+/// it fits).
 pub fn pose_overlays(
     parts: ModelParts,
     frames: &[Frame],
