@@ -182,7 +182,7 @@ fn a_scope_light_with_fixed_poses_is_named_as_unused() {
     };
     let mut scene = BuildScene::prepare(&case, &opts, &mut BuildTimings::default()).unwrap();
     let mut warnings = Vec::new();
-    assert!(register_poses(&mut scene, &opts, &mut warnings)
+    assert!(register_poses(&mut scene, &opts, None, &mut warnings)
         .unwrap()
         .is_none());
     assert!(

@@ -156,13 +156,14 @@ impl PoseRegistration {
 pub struct TrackingSummary {
     /// Frames accepted by the tracker (the first, given, included).
     pub frames_tracked: usize,
-    /// Frames of the video.
+    /// Frames tried: the video's, or those evenly spaced in it that were tracked when it
+    /// has more frames than the build's budget (model.json `frame_selection`).
     pub frames: usize,
-    /// The first frame of the first run of flagged frames after which the track was lost
-    /// (`None`: never lost).
+    /// The first frame (its number in the video, poses.json order) of the first run of
+    /// flagged frames after which the track was lost (`None`: never lost).
     pub first_lost: Option<usize>,
-    /// The frames tracking resumed at after it was lost there, each time from the frames
-    /// before refined by the registration's rounds.
+    /// The frames (numbers in the video) tracking resumed at after it was lost there, each
+    /// time from the frames before refined by the registration's rounds.
     #[serde(default)]
     pub resumed_at: Vec<usize>,
     /// Fits of the light and texture the frames were tracked against.

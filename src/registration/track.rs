@@ -88,11 +88,16 @@ pub struct TrackState {
     /// The first frame of the first run of `lost_after` flagged frames.
     pub first_lost: Option<usize>,
     flagged_in_row: usize,
+    /// Each frame's position in the video (frame number): the constant velocity is per
+    /// video frame, and frames left out between tracked ones widen the step.
+    times: Vec<f64>,
 }
 
 impl TrackState {
-    /// A video of `n` frames whose first frame has the pose `first` and gain `gain`.
-    pub fn new(n: usize, first: Affine, gain: f64) -> TrackState {
+    /// The frames numbered `frame_numbers` in their video (increasing), the first with the
+    /// pose `first` and gain `gain`.
+    pub fn new(frame_numbers: &[usize], first: Affine, gain: f64) -> TrackState {
+        let n = frame_numbers.len();
         let mut accepted = vec![false; n];
         accepted[0] = true;
         TrackState {
@@ -103,6 +108,7 @@ impl TrackState {
             costs: vec![f64::NAN; n],
             first_lost: None,
             flagged_in_row: 0,
+            times: frame_numbers.iter().map(|&f| f as f64).collect(),
         }
     }
 
@@ -141,7 +147,10 @@ impl TrackState {
         match ok.as_slice() {
             [] => self.poses[0],
             [a] => self.poses[*a],
-            [.., a, b] => extrapolate(&self.poses[*a], *a, &self.poses[*b], *b, f),
+            [.., a, b] => {
+                let t = &self.times;
+                extrapolate(&self.poses[*a], t[*a], &self.poses[*b], t[*b], t[f])
+            }
         }
     }
 
@@ -162,10 +171,10 @@ impl TrackState {
     }
 }
 
-/// The pose at frame `f` on the constant-velocity motion through `pa` (frame `a`) and `pb`
-/// (frame `b`, `a < b`).
-pub fn extrapolate(pa: &Affine, a: usize, pb: &Affine, b: usize, f: usize) -> Affine {
-    let t = (f as f64 - a as f64) / (b as f64 - a as f64);
+/// The pose at time `f` on the constant-velocity motion through `pa` (at time `a`) and `pb`
+/// (at time `b`, `a < b`).
+pub fn extrapolate(pa: &Affine, a: f64, pb: &Affine, b: f64, f: f64) -> Affine {
+    let t = (f - a) / (b - a);
     let (ra, rb) = (rotation_of(pa), rotation_of(pb));
     let w = rotation_log(&(rb * ra.transpose()));
     let r = Rotation3::new(w * t).into_inner() * ra;

@@ -73,17 +73,36 @@ pub enum Reason {
     NoNewCoverage,
     /// It would add coverage, but the budget was spent on frames that add more.
     OverBudget,
+    /// Without a tracker (`--poses first`), between the frames tracked: a video longer than
+    /// the tracking's budget is tracked on frames evenly spaced in time.
+    NotTracked,
 }
 
 impl Reason {
     /// Every reason, in report order.
-    pub const ALL: [Reason; 5] = [
+    pub const ALL: [Reason; 6] = [
         Reason::Chosen,
         Reason::Blurred,
         Reason::BadlyExposed,
         Reason::NoNewCoverage,
         Reason::OverBudget,
+        Reason::NotTracked,
     ];
+
+    /// The reason a frame with the hard failure `f` is not used.
+    pub fn of_failure(f: Failure) -> Reason {
+        match f {
+            Failure::Blurred => Reason::Blurred,
+            Failure::BadlyExposed => Reason::BadlyExposed,
+        }
+    }
+
+    /// The failure whose reason has the name `name` (as [`Reason::name`]).
+    pub fn failure_named(name: &str) -> Option<Failure> {
+        [Failure::Blurred, Failure::BadlyExposed]
+            .into_iter()
+            .find(|&f| Reason::of_failure(f).name() == name)
+    }
 
     /// The name used in model.json and the report.
     pub fn name(self) -> &'static str {
@@ -93,6 +112,7 @@ impl Reason {
             Reason::BadlyExposed => "badly_exposed",
             Reason::NoNewCoverage => "adds_no_coverage",
             Reason::OverBudget => "over_budget",
+            Reason::NotTracked => "not_tracked",
         }
     }
 }
@@ -184,15 +204,41 @@ pub fn choose_frames(
     );
     for &i in &failed {
         decisions[i] = Decision {
-            reason: match judged[i].failure {
-                Some(Failure::Blurred) => Reason::Blurred,
-                _ => Reason::BadlyExposed,
-            },
+            reason: failure_reason(judged[i].failure, Reason::BadlyExposed),
             gain: gains[i],
         };
     }
     for &i in &picked {
         decisions[i] = chosen(gains[i]);
+    }
+    decisions
+}
+
+/// The reason of a frame judged `failure`, `healthy` when it was not.
+fn failure_reason(failure: Option<Failure>, healthy: Reason) -> Reason {
+    failure.map_or(healthy, Reason::of_failure)
+}
+
+/// The frames to track when the poses are not known yet (`--poses first`: coverage cannot
+/// be cast before the frames are tracked): at most `most`, evenly spaced in time from the
+/// first (its pose is the one given) to the last. They are `Chosen` for now, the others
+/// `NotTracked` (or their failure's reason); once they are tracked [`choose_frames`] chooses
+/// among them. Frames judged failed are tracked too: the tracker needs its frames close
+/// together, and a video's frames far apart in content are judged blurred by mistake (6 of
+/// the first 36 frames of the demo phantom's path, which has no blur).
+pub fn frames_to_track(judged: &[Judgement], most: usize) -> Vec<Decision> {
+    let n = judged.len();
+    let mut decisions: Vec<Decision> = judged
+        .iter()
+        .map(|j| Decision {
+            reason: failure_reason(j.failure, Reason::NotTracked),
+            gain: 0.0,
+        })
+        .collect();
+    let m = most.max(1).min(n);
+    for k in 0..m {
+        // Strictly increasing in k, as m <= n.
+        decisions[k * (n - 1) / (m - 1).max(1)].reason = Reason::Chosen;
     }
     decisions
 }
@@ -273,5 +319,23 @@ mod tests {
             vec![Chosen, Chosen, Chosen, OverBudget, Blurred, BadlyExposed]
         );
         assert!((d[3].gain - 7.2).abs() < 1e-6);
+    }
+
+    #[test]
+    fn frames_to_track_are_spaced_evenly_from_the_first_to_the_last() {
+        use Reason::*;
+        let mut j = vec![judged(1.0, None); 12];
+        j[0].failure = Some(Failure::Blurred);
+        j[4].failure = Some(Failure::Blurred);
+        j[7].failure = Some(Failure::BadlyExposed);
+        let reasons =
+            |most| -> Vec<Reason> { frames_to_track(&j, most).iter().map(|d| d.reason).collect() };
+        let r = reasons(4);
+        let tracked: Vec<usize> = (0..12).filter(|&i| r[i] == Chosen).collect();
+        assert_eq!(tracked, vec![0, 3, 7, 11]);
+        assert_eq!((r[1], r[4], r[5]), (NotTracked, Blurred, NotTracked));
+        // A budget above the frames tracks all of them.
+        assert!(reasons(50).iter().all(|&r| r == Chosen));
+        assert_eq!(reasons(1)[0], Chosen);
     }
 }

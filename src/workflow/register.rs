@@ -52,7 +52,7 @@ pub fn register_command(
     let mut timings = BuildTimings::default();
     let mut scene = BuildScene::prepare(case_dir, opts, &mut timings)?;
     let mut warnings = Vec::new();
-    let registration = register_poses(&mut scene, opts, &mut warnings)?
+    let registration = register_poses(&mut scene, opts, None, &mut warnings)?
         .ok_or_else(|| BuildError::Registration("--registration-rounds 0: nothing to do".into()))?;
     let pose_truth = poses_against_truth(
         Some(&registration),

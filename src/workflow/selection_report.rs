@@ -14,6 +14,7 @@ fn colour(r: Reason) -> &'static str {
         Reason::BadlyExposed => "#ff7f0e",
         Reason::NoNewCoverage => "#7f7f7f",
         Reason::OverBudget => "#9467bd",
+        Reason::NotTracked => "#c7c7c7",
     }
 }
 

@@ -17,8 +17,18 @@ pub fn untracked_phantom(case_dir: &Path, kept: usize) -> Vec<Affine> {
 }
 
 pub fn untracked_phantom_jitter(case_dir: &Path, kept: usize, jitter_deg: f64) -> Vec<Affine> {
+    untracked_phantom_paced(case_dir, 80, kept, jitter_deg)
+}
+
+/// The same with `frames` frames over the whole path (80: the demo's pace).
+pub fn untracked_phantom_paced(
+    case_dir: &Path,
+    frames: usize,
+    kept: usize,
+    jitter_deg: f64,
+) -> Vec<Affine> {
     let opts = PhantomOptions {
-        frames: 80,
+        frames,
         width: 128,
         height: 128,
         novel_views: 1,

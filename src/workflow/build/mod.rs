@@ -69,11 +69,11 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
             scene.case.ct_source.path().display()
         ));
     }
-    let selection = timed(&mut timings.selection, || {
+    let mut selection = timed(&mut timings.selection, || {
         selection::select_frames(&mut scene, opts, &mut warnings)
     })?;
     let registration = timed(&mut timings.registration, || {
-        registration::register_poses(&mut scene, opts, &mut warnings)
+        registration::register_poses(&mut scene, opts, selection.as_mut(), &mut warnings)
     })?;
     let pose_truth = poses_against_truth(
         registration.as_ref(),

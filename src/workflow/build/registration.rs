@@ -38,6 +38,7 @@ use super::frames::DepthCache;
 use super::light::{calibrated_light, Consensus};
 use super::options::{BuildOptions, PosesMode};
 use super::scene::BuildScene;
+use super::selection::choose_tracked;
 use super::tracking::track_poses;
 use crate::camera::{Camera, Pose};
 use crate::image::reduce::{reduce_frame, reduce_mask};
@@ -45,6 +46,7 @@ use crate::image::Frame;
 use crate::io::poses::PoseEntry;
 use crate::math::Affine;
 use crate::model::registration::{FramePoseResult, PoseOverlay, PoseRegistration, RoundSummary};
+use crate::model::selection::FrameSelection;
 use crate::registration::{
     blocks::BlockOptions, consensus::consensus_poses, delta_between, register_round,
     FrameRegistration, FrameStatus, ModelParts, RegistrationOptions, RoundKind, RoundOptions,
@@ -72,10 +74,13 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// Refine the poses of `scene` (unless `opts.poses` is [`PosesMode::Fixed`]); flagged frames
-/// are removed from the scene. `None` when the poses were trusted as given.
+/// are removed from the scene. `None` when the poses were trusted as given. Tracked from the
+/// first pose, the frames of a `selection` that chose frames to track are chosen among once
+/// tracked ([`choose_tracked`]).
 pub fn register_poses(
     scene: &mut BuildScene,
     opts: &BuildOptions,
+    selection: Option<&mut FrameSelection>,
     warnings: &mut Vec<String>,
 ) -> Result<Option<PoseRegistration>> {
     let first = opts.poses == PosesMode::First;
@@ -88,11 +93,21 @@ pub fn register_poses(
         }
         return Ok(None);
     }
-    let view = RegistrationView::new(scene, opts.quiet)?;
+    let mut view = RegistrationView::new(scene, opts.quiet)?;
     // Without a tracker the rounds start from the poses tracked from the first frame's.
     let (mut statuses, tracking, mut last_light) = if first {
         let (state, summary, light) = track_poses(scene, &view, opts, warnings)?;
-        (tracked_statuses(&state), Some(summary), Some(light))
+        let mut statuses = tracked_statuses(&state);
+        if let Some(record) = selection {
+            let accepted: Vec<bool> = statuses.iter().map(|s| !s.1).collect();
+            let keep = choose_tracked(scene, record, &accepted, opts);
+            if keep.len() < scene.frame_count() {
+                scene.keep_frames(&keep, opts.depth_cache_bytes);
+                view = view.subset(&keep);
+                statuses = keep.iter().map(|&i| statuses[i].clone()).collect();
+            }
+        }
+        (statuses, Some(summary), Some(light))
     } else {
         (Vec::new(), None, None)
     };
@@ -957,7 +972,8 @@ mod tests {
     fn frames_accepted_after_the_track_was_lost_are_flagged() {
         // Frames 1-2 tracked, 3-5 flagged (the track lost at 3), 6 accepted again from poses
         // extrapolated past the loss.
-        let mut state = TrackState::new(7, Affine::identity(), 1.0);
+        let numbers: Vec<usize> = (0..7).collect();
+        let mut state = TrackState::new(&numbers, Affine::identity(), 1.0);
         for f in 1..7 {
             let ok = !(3..6).contains(&f);
             state.accepted[f] = ok;

@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::options::BuildOptions;
+use super::options::{BuildOptions, PosesMode};
 use super::scene::BuildScene;
 use crate::camera::Camera;
 use crate::image::Frame;
@@ -17,14 +17,16 @@ use crate::io::poses::FrameRef;
 use crate::model::selection::{FrameSelection, SelectedFrame};
 use crate::raycast::{cast_frame_with, RayTable};
 use crate::selection::{
-    choose_frames, judge_frames, needs_coverage, score_frame, CoverState, CoverageGrid, Failure,
-    FrameCoverage, FrameStats, Reason, WallHit,
+    choose_frames, frames_to_track, judge_frames, needs_coverage, score_frame, CoverState,
+    CoverageGrid, Decision, FrameCoverage, FrameStats, Judgement, Reason, WallHit,
 };
 use crate::workflow::progress::Progress;
 use crate::{Error, Result};
 
 /// Choose the frames of `scene` (unless `opts.selection.max_frames` is 0) and drop the others
-/// from it. `None` when no selection ran.
+/// from it. `None` when no selection ran. Without a tracker (`--poses first`) a video over
+/// the budget has no poses to cast coverage from yet: the frames to track are chosen here
+/// ([`frames_to_track`]) and the budget's among them once tracked ([`choose_tracked`]).
 pub fn select_frames(
     scene: &mut BuildScene,
     opts: &BuildOptions,
@@ -39,11 +41,31 @@ pub fn select_frames(
     let judged = judge_frames(&stats, &sel.judge);
     let t_score = t.elapsed().as_secs_f64();
 
+    if opts.poses == PosesMode::First && needs_coverage(&judged, sel.max_frames) {
+        let t = Instant::now();
+        let most = sel
+            .max_frames
+            .saturating_mul(opts.tracking.tracked_per_used);
+        let decisions = frames_to_track(&judged, most);
+        let keep = chosen(&decisions);
+        scene.keep_frames(&keep, opts.depth_cache_bytes);
+        let seconds = [t_score, 0.0, t.elapsed().as_secs_f64()];
+        return Ok(Some(record(
+            sel.max_frames,
+            &stats,
+            &judged,
+            &decisions,
+            true,
+            seconds,
+        )));
+    }
+
     let t = Instant::now();
     let atlas = &scene.atlas;
     let grid = CoverageGrid::new(atlas.width, atlas.height, atlas.texel_mm, sel.cell_mm);
     let (coverage, ray_grid) = if needs_coverage(&judged, sel.max_frames) {
-        let (c, g) = cast_coverage(scene, &grid, opts);
+        let all: Vec<usize> = (0..scene.frame_count()).collect();
+        let (c, g) = cast_coverage(scene, &all, &grid, opts);
         (c, Some(g))
     } else {
         (Vec::new(), None)
@@ -52,22 +74,7 @@ pub fn select_frames(
 
     let t = Instant::now();
     let decisions = choose_frames(&judged, &coverage, grid.cells(), sel);
-    let keep: Vec<usize> = (0..decisions.len())
-        .filter(|&i| decisions[i].reason == Reason::Chosen)
-        .collect();
-    let seen = |frames: &mut dyn Iterator<Item = usize>| {
-        let mut st = CoverState::new(grid.cells(), 1);
-        frames.for_each(|i| st.add(&coverage[i], 1.0));
-        st.seen_cells()
-    };
-    let (cells_used, cells_all) = if coverage.is_empty() {
-        (0, 0)
-    } else {
-        (
-            seen(&mut keep.iter().copied()),
-            seen(&mut (0..coverage.len())),
-        )
-    };
+    let keep = chosen(&decisions);
     if keep.is_empty() {
         warnings.push(
             "frame selection: no frame sees the airway wall usably; every frame is kept".into(),
@@ -75,19 +82,135 @@ pub fn select_frames(
     } else if keep.len() < scene.frame_count() {
         scene.keep_frames(&keep, opts.depth_cache_bytes);
     }
+    let seconds = [t_score, t_cast, t.elapsed().as_secs_f64()];
+    let mut out = record(
+        sel.max_frames,
+        &stats,
+        &judged,
+        &decisions,
+        !keep.is_empty(),
+        seconds,
+    );
+    out.coverage_grid = ray_grid;
+    (out.cells_seen_used, out.cells_seen_all) = cells_seen(&coverage, &keep, grid.cells());
+    Ok(Some(out))
+}
+
+/// After the frames of `scene` were tracked from the first pose (`--poses first`, the frames
+/// [`select_frames`] chose to track): choose among those the tracker accepted (`accepted`,
+/// one per frame of the scene) the frames the budget allows, by the wall they see from their
+/// tracked poses, as with a tracker's poses. The first frame of the video stays (its pose is
+/// the one given, and anchors the registration). Updates `record`; returns the frames of the
+/// scene to keep: the chosen, and those the tracker did not accept (the registration reports
+/// them and leaves them out).
+pub fn choose_tracked(
+    scene: &BuildScene,
+    record: &mut FrameSelection,
+    accepted: &[bool],
+    opts: &BuildOptions,
+) -> Vec<usize> {
+    let sel = &opts.selection;
+    let n = scene.frame_count();
+    let candidates: Vec<usize> = (0..n).filter(|&i| accepted[i]).collect();
+    if sel.max_frames == 0 || candidates.len() <= sel.max_frames {
+        return (0..n).collect();
+    }
+    let t = Instant::now();
+    let atlas = &scene.atlas;
+    let grid = CoverageGrid::new(atlas.width, atlas.height, atlas.texel_mm, sel.cell_mm);
+    let (coverage, ray_grid) = cast_coverage(scene, &candidates, &grid, opts);
+    let t_cast = t.elapsed().as_secs_f64();
+
+    let t = Instant::now();
+    let entry = |i: usize| &record.frames[scene.frame_numbers[i]];
+    let judged: Vec<Judgement> = candidates
+        .iter()
+        .map(|&i| Judgement {
+            relative_sharpness: entry(i).relative_sharpness,
+            score: entry(i).score,
+            failure: entry(i).flagged.as_deref().and_then(Reason::failure_named),
+        })
+        .collect();
+    let decisions = choose_frames(&judged, &coverage, grid.cells(), sel);
+    let mut keep: Vec<usize> = (0..n).filter(|&i| !accepted[i]).collect();
+    for (&i, d) in candidates.iter().zip(&decisions) {
+        let first = scene.frame_numbers[i] == 0;
+        let reason = match first {
+            true => Reason::Chosen,
+            false => d.reason,
+        };
+        if reason == Reason::Chosen {
+            keep.push(i);
+        }
+        let e = &mut record.frames[scene.frame_numbers[i]];
+        (e.reason, e.used, e.coverage_gain) = (reason, reason == Reason::Chosen, d.gain);
+    }
+    keep.sort_unstable();
+    let used: Vec<usize> = (0..candidates.len())
+        .filter(|&k| keep.binary_search(&candidates[k]).is_ok())
+        .collect();
+    (record.cells_seen_used, record.cells_seen_all) = cells_seen(&coverage, &used, grid.cells());
+    record.coverage_grid = Some(ray_grid);
+    record.used = record.frames.iter().filter(|f| f.used).count();
+    record.counts = reason_counts(&record.frames);
+    record.seconds[1] += t_cast;
+    record.seconds[2] += t.elapsed().as_secs_f64();
+    keep
+}
+
+/// The frames decided `Chosen`.
+fn chosen(decisions: &[Decision]) -> Vec<usize> {
+    (0..decisions.len())
+        .filter(|&i| decisions[i].reason == Reason::Chosen)
+        .collect()
+}
+
+/// Wall cells seen by the frames `used` (indices into `coverage`), and by all of them.
+fn cells_seen(coverage: &[FrameCoverage], used: &[usize], cells: usize) -> (usize, usize) {
+    if coverage.is_empty() {
+        return (0, 0);
+    }
+    let seen = |frames: &mut dyn Iterator<Item = usize>| {
+        let mut st = CoverState::new(cells, 1);
+        frames.for_each(|i| st.add(&coverage[i], 1.0));
+        st.seen_cells()
+    };
+    (
+        seen(&mut used.iter().copied()),
+        seen(&mut (0..coverage.len())),
+    )
+}
+
+fn reason_counts(frames: &[SelectedFrame]) -> std::collections::BTreeMap<String, usize> {
+    Reason::ALL
+        .iter()
+        .map(|r| {
+            (
+                r.name().to_string(),
+                frames.iter().filter(|f| f.reason == *r).count(),
+            )
+        })
+        .collect()
+}
+
+/// The selection's record of every frame of the video (`any_chosen` false: none was, and
+/// every frame is used); no coverage yet.
+fn record(
+    budget: usize,
+    stats: &[FrameStats],
+    judged: &[Judgement],
+    decisions: &[Decision],
+    any_chosen: bool,
+    seconds: [f64; 3],
+) -> FrameSelection {
     let frames: Vec<SelectedFrame> = (0..decisions.len())
         .map(|i| SelectedFrame {
             frame: i,
-            used: keep.is_empty() || decisions[i].reason == Reason::Chosen,
+            used: !any_chosen || decisions[i].reason == Reason::Chosen,
             reason: decisions[i].reason,
-            flagged: judged[i].failure.map(|f| {
-                match f {
-                    Failure::Blurred => Reason::Blurred,
-                    Failure::BadlyExposed => Reason::BadlyExposed,
-                }
-                .name()
-                .to_string()
-            }),
+            flagged: judged[i]
+                .failure
+                .map(|f| Reason::of_failure(f).name().to_string()),
             sharpness: stats[i].sharpness,
             relative_sharpness: judged[i].relative_sharpness,
             saturated_share: stats[i].saturated_share,
@@ -96,25 +219,16 @@ pub fn select_frames(
             coverage_gain: decisions[i].gain,
         })
         .collect();
-    let counts = Reason::ALL
-        .iter()
-        .map(|r| {
-            (
-                r.name().to_string(),
-                frames.iter().filter(|f| f.reason == *r).count(),
-            )
-        })
-        .collect();
-    Ok(Some(FrameSelection {
-        budget: sel.max_frames,
+    FrameSelection {
+        budget,
         used: frames.iter().filter(|f| f.used).count(),
-        counts,
-        coverage_grid: ray_grid,
-        cells_seen_used: cells_used,
-        cells_seen_all: cells_all,
-        seconds: [t_score, t_cast, t.elapsed().as_secs_f64()],
+        counts: reason_counts(&frames),
+        coverage_grid: None,
+        cells_seen_used: 0,
+        cells_seen_all: 0,
+        seconds,
         frames,
-    }))
+    }
 }
 
 /// Score every frame in one pass: PNG files decoded in parallel (one frame per thread in
@@ -178,10 +292,12 @@ fn coverage_level(camera: &Camera, max_rays: usize) -> usize {
     level
 }
 
-/// Every frame's coverage, ray cast from its pose through the reduced camera (the case's
-/// image mask sampled at each reduced pixel's centre); returns the ray grid's size too.
+/// The coverage of the frames `frames` (indices into the scene), each ray cast from its pose
+/// through the reduced camera (the case's image mask sampled at each reduced pixel's centre);
+/// returns the ray grid's size too.
 fn cast_coverage(
     scene: &BuildScene,
+    frames: &[usize],
     grid: &CoverageGrid,
     opts: &BuildOptions,
 ) -> (Vec<FrameCoverage>, [u32; 2]) {
@@ -200,11 +316,10 @@ fn cast_coverage(
             })
             .collect()
     });
-    let n = scene.frame_count();
-    let progress = Progress::new("frame coverage", n as u64, opts.quiet);
-    let coverage = (0..n)
-        .into_par_iter()
-        .map(|i| {
+    let progress = Progress::new("frame coverage", frames.len() as u64, opts.quiet);
+    let coverage = frames
+        .par_iter()
+        .map(|&i| {
             let mut g = cast_frame_with(&scene.scene, &rays, &scene.poses[i]);
             if let Some(m) = &mask {
                 g.mask_out(m);

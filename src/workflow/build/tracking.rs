@@ -58,6 +58,13 @@ pub struct TrackingOptions {
     pub resume_frames: usize,
     /// Rounds of the registration that refine them (the build's own rounds may be none).
     pub resume_rounds: usize,
+    /// A video over the frame selection's budget is tracked on up to this many times the
+    /// budget, evenly spaced in time, and the budget's frames are chosen among them once
+    /// tracked (their coverage needs their poses). The tracker needs frames close together:
+    /// every one of a 30 frames a second video would be tracked, at a cost that grows with
+    /// them (0.4-0.75 s a frame at 320x320), while the budget's frames alone are up to ten
+    /// video frames apart in a minute's video.
+    pub tracked_per_used: usize,
 }
 
 impl Default for TrackingOptions {
@@ -71,6 +78,7 @@ impl Default for TrackingOptions {
             resumes: 4,
             resume_frames: 32,
             resume_rounds: 9,
+            tracked_per_used: 2,
         }
     }
 }
@@ -115,7 +123,7 @@ pub(super) fn track_poses(
     let started = Instant::now();
     let t = &opts.tracking;
     let n = scene.frame_count();
-    let mut state = TrackState::new(n, scene.poses[0], 1.0);
+    let mut state = TrackState::new(&scene.frame_numbers, scene.poses[0], 1.0);
     let mut fits = 0;
     let mut resumed_at: Vec<usize> = Vec::new();
     let mut light = None;
@@ -142,9 +150,12 @@ pub(super) fn track_poses(
     }
     scene.poses.clone_from(&state.poses);
     let tracked = state.accepted.iter().filter(|&&a| a).count();
-    if let Some(f) = state.first_lost {
+    // Reported as frames of the video (poses.json order), which the frames tracked may skip.
+    let first_lost = state.first_lost.map(|f| scene.frame_numbers[f]);
+    let resumed_at: Vec<usize> = resumed_at.iter().map(|&f| scene.frame_numbers[f]).collect();
+    if let Some(f) = first_lost {
         warnings.push(format!(
-            "tracking from the first pose was lost at frame {f} of {n} ({tracked} frames tracked{})",
+            "tracking from the first pose was lost at frame {f} ({tracked} of {n} frames tracked{})",
             match resumed_at.len() {
                 0 => String::new(),
                 _ => format!(", resumed at frames {resumed_at:?} after refining the frames before"),
@@ -155,7 +166,7 @@ pub(super) fn track_poses(
     let summary = TrackingSummary {
         frames_tracked: tracked,
         frames: n,
-        first_lost: state.first_lost,
+        first_lost,
         resumed_at,
         light_fits: fits,
         seconds,
@@ -328,7 +339,7 @@ fn correct_window(
         RoundKind::Geometry,
         &RoundOptions {
             video: VideoOptions {
-                frame_numbers: frames_in.clone(),
+                frame_numbers: frames_in.iter().map(|&i| scene.frame_numbers[i]).collect(),
                 ..VideoOptions::default()
             },
             geometry_finest_level: window_finest_level(&view.camera),
