@@ -5,7 +5,7 @@
 
 #[path = "common/cli.rs"]
 mod cli;
-use cli::{ok, run};
+use cli::{ok, phantom_with, run};
 use std::path::Path;
 
 /// Mean PSNR (dB) of the calibrated light's new views in `model/evaluation.json`.
@@ -88,20 +88,7 @@ fn a_mask_of_the_wrong_size_is_refused_naming_the_file() {
 fn inspect_reports_the_mask_or_a_black_border_without_one() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    ok(&run(
-        &[
-            "phantom",
-            "--out",
-            "case",
-            "--frames",
-            "3",
-            "--size",
-            "96x96",
-            "--scope-overlay",
-            "--quiet",
-        ],
-        dir,
-    ));
+    phantom_with(dir, 3, "96x96", &["--scope-overlay"]);
     let o = run(&["inspect", "case"], dir);
     ok(&o);
     let text = String::from_utf8_lossy(&o.stdout);

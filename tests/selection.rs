@@ -5,7 +5,7 @@
 
 #[path = "common/cli.rs"]
 mod cli;
-use cli::{ok, phantom, run};
+use cli::{ok, phantom, phantom_with, run};
 
 use bronchosim::model::manifest::BuildTimings;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
@@ -147,23 +147,12 @@ fn max_frames_zero_builds_the_same_model_as_a_budget_above_the_frames() {
 fn a_tracked_video_over_the_budget_is_registered_and_reported_on_its_chosen_frames() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    ok(&run(
-        &[
-            "phantom",
-            "--out",
-            "case",
-            "--frames",
-            "48",
-            "--size",
-            "96x96",
-            "--pose-noise-mm",
-            "1.5",
-            "--pose-noise-deg",
-            "2",
-            "--quiet",
-        ],
+    phantom_with(
         dir,
-    ));
+        48,
+        "96x96",
+        &["--pose-noise-mm", "1.5", "--pose-noise-deg", "2"],
+    );
     ok(&run(
         &[
             "build",

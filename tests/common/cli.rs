@@ -27,13 +27,17 @@ pub fn ok(o: &Output) {
 
 /// Write a small phantom case (`frames` frames of `size`, e.g. "160x160") to `cwd/case`.
 pub fn phantom(cwd: &Path, frames: usize, size: &str) {
+    phantom_with(cwd, frames, size, &[]);
+}
+
+/// The same with more `phantom` arguments (e.g. `--pose-noise-mm 1.5`).
+pub fn phantom_with(cwd: &Path, frames: usize, size: &str, more: &[&str]) {
     let n = frames.to_string();
-    ok(&run(
-        &[
-            "phantom", "--out", "case", "--frames", &n, "--size", size, "--quiet",
-        ],
-        cwd,
-    ));
+    let mut args = vec![
+        "phantom", "--out", "case", "--frames", &n, "--size", size, "--quiet",
+    ];
+    args.extend_from_slice(more);
+    ok(&run(&args, cwd));
 }
 
 /// The numbers of a JSON array (e.g. a `camera_to_world` matrix).
