@@ -37,6 +37,17 @@ fn poses_of(entries: &[PoseEntry]) -> Vec<Affine> {
     entries.iter().map(|p| p.pose.camera_to_world).collect()
 }
 
+/// The options of the tracking from the first pose without the registration's rounds.
+fn tracking_alone() -> BuildOptions {
+    BuildOptions {
+        poses: PosesMode::First,
+        registration_rounds: 0,
+        cross_validate_every: 0,
+        quiet: true,
+        ..Default::default()
+    }
+}
+
 /// `register CASE --out OUT --poses first --rounds 0`: the tracking alone (its options as
 /// `tune` leaves them); its summary and the tracked poses.
 fn track_only(
@@ -44,13 +55,7 @@ fn track_only(
     out: &Path,
     tune: impl FnOnce(&mut BuildOptions),
 ) -> (TrackingSummary, Vec<Affine>) {
-    let mut opts = BuildOptions {
-        poses: PosesMode::First,
-        registration_rounds: 0,
-        cross_validate_every: 0,
-        quiet: true,
-        ..Default::default()
-    };
+    let mut opts = tracking_alone();
     tune(&mut opts);
     let s = register_command(case_dir, out, &opts).unwrap();
     let tracked = poses_of(&read_poses(&out.join("poses.json"), case_dir).unwrap());
@@ -133,13 +138,7 @@ fn a_video_over_the_budget_is_tracked_densely_and_the_budget_chosen_once_tracked
     // Twice the demo's pace (0.85 mm between frames), as a video with more frames than the
     // build uses; the same stretch of airway as the 30 frames of the test above.
     let truth = untracked_phantom_paced(&case_dir, 160, 60, PathOptions::default().jitter_deg);
-    let mut opts = BuildOptions {
-        poses: PosesMode::First,
-        registration_rounds: 0,
-        cross_validate_every: 0,
-        quiet: true,
-        ..Default::default()
-    };
+    let mut opts = tracking_alone();
     opts.selection.max_frames = 10;
     opts.tracking.tracked_per_used = 3;
     let mut scene = BuildScene::prepare(&case_dir, &opts, &mut BuildTimings::default()).unwrap();
@@ -148,11 +147,17 @@ fn a_video_over_the_budget_is_tracked_densely_and_the_budget_chosen_once_tracked
         .unwrap()
         .unwrap();
     // Before tracking no frame has a pose to cast coverage from: 30 of the 60 are tracked,
-    // evenly spaced from the first to the last (at the demo's pace).
+    // evenly spaced from the first over those not judged blurred (about the demo's pace).
+    println!("tracked {:?}", scene.frame_numbers);
     assert_eq!(scene.frame_count(), 30, "{:?}", record.counts);
     assert_eq!(record.frames.iter().filter(|f| !f.used).count(), 30);
-    assert_eq!(scene.frame_numbers[..3], [0, 2, 4]);
-    assert_eq!(scene.frame_numbers[29], 59);
+    assert_eq!(scene.frame_numbers[0], 0);
+    assert!(scene.frame_numbers[29] >= 55, "{:?}", scene.frame_numbers);
+    let steps = scene.frame_numbers.windows(2).map(|w| w[1] - w[0]);
+    assert!(steps.clone().all(|s| s <= 5), "{:?}", scene.frame_numbers);
+    assert!(scene.frame_numbers[1..]
+        .iter()
+        .all(|&f| record.frames[f].flagged.is_none()));
     register_poses(&mut scene, &opts, Some(&mut record), &mut warnings)
         .unwrap()
         .unwrap();
@@ -161,9 +166,8 @@ fn a_video_over_the_budget_is_tracked_densely_and_the_budget_chosen_once_tracked
         scene.frame_numbers, record.counts, record.cells_seen_used, record.cells_seen_all
     );
     // Once tracked, the budget's frames are chosen by the wall they see from their tracked
-    // poses, the first kept. Measured: frames 0, 1, 14, 15, 18, 19, 24, 25, 30, 31 (with the
-    // true poses the choice among all 36 is 0-3, 14, 15, 24, 25, 28, 30); the 30 tracked
-    // frames see 4,550 wall cells and the chosen 3,648 of them (true poses: 5,387 and 4,449).
+    // poses, the first kept. Measured: frames 0, 1, 3, 17, 23, 27, 49, 51, 53, 57; the 30
+    // tracked frames see 5,094 wall cells, the chosen 4,408 of them (87%).
     assert_eq!(scene.frame_count(), 10, "{:?}", scene.frame_numbers);
     assert_eq!(scene.frame_numbers[0], 0);
     assert!(scene.frame_numbers[9] >= 28, "{:?}", scene.frame_numbers);
@@ -176,7 +180,7 @@ fn a_video_over_the_budget_is_tracked_densely_and_the_budget_chosen_once_tracked
         record.cells_seen_used,
         record.cells_seen_all
     );
-    // Measured (tracking alone, no rounds): every chosen frame within 0.44 mm.
+    // Measured (tracking alone, no rounds): every chosen frame within 0.45 mm.
     let chosen_truth: Vec<Affine> = scene.frame_numbers.iter().map(|&i| truth[i]).collect();
     let (errors, within_mm, _) = tracked_errors(&scene.poses, &chosen_truth);
     println!("errors of the chosen frames (mm, deg): {errors:?}");
