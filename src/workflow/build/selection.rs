@@ -181,6 +181,7 @@ fn cells_seen(coverage: &[FrameCoverage], used: &[usize], cells: usize) -> (usiz
     )
 }
 
+/// Frames per reason, by the reasons' names (every reason, zero counts too).
 fn reason_counts(frames: &[SelectedFrame]) -> std::collections::BTreeMap<String, usize> {
     Reason::ALL
         .iter()
