@@ -133,7 +133,9 @@ pub fn choose_tracked(
         .collect();
     let decisions = choose_frames(&judged, &coverage, grid.cells(), sel);
     let mut keep: Vec<usize> = (0..n).filter(|&i| !accepted[i]).collect();
-    for (&i, d) in candidates.iter().zip(&decisions) {
+    // Positions in `candidates` of the frames used.
+    let mut used = Vec::new();
+    for (k, (&i, d)) in candidates.iter().zip(&decisions).enumerate() {
         let first = scene.frame_numbers[i] == 0;
         let reason = match first {
             true => Reason::Chosen,
@@ -141,14 +143,12 @@ pub fn choose_tracked(
         };
         if reason == Reason::Chosen {
             keep.push(i);
+            used.push(k);
         }
         let e = &mut record.frames[scene.frame_numbers[i]];
         (e.reason, e.used, e.coverage_gain) = (reason, reason == Reason::Chosen, d.gain);
     }
     keep.sort_unstable();
-    let used: Vec<usize> = (0..candidates.len())
-        .filter(|&k| keep.binary_search(&candidates[k]).is_ok())
-        .collect();
     (record.cells_seen_used, record.cells_seen_all) = cells_seen(&coverage, &used, grid.cells());
     record.coverage_grid = Some(ray_grid);
     record.used = record.frames.iter().filter(|f| f.used).count();

@@ -60,10 +60,10 @@ pub struct TrackingOptions {
     pub resume_rounds: usize,
     /// A video over the frame selection's budget is tracked on up to this many times the
     /// budget, evenly spaced in time, and the budget's frames are chosen among them once
-    /// tracked (their coverage needs their poses). The tracker needs frames close together:
-    /// every one of a 30 frames a second video would be tracked, at a cost that grows with
-    /// them (0.4-0.75 s a frame at 320x320), while the budget's frames alone are up to ten
-    /// video frames apart in a minute's video.
+    /// tracked (their coverage needs their poses). The tracker needs frames close together,
+    /// and each costs 0.3-0.75 s: tracking the budget's frames alone lost a real airway tree
+    /// at 2 mm between them (ATM_307, 160 frames, budget 80: lost at frame 80) that twice as
+    /// many held to its end (BENCHMARKS.md, session 30).
     pub tracked_per_used: usize,
 }
 
