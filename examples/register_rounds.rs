@@ -379,6 +379,9 @@ fn main() -> anyhow::Result<()> {
         force: true,
         ..Default::default()
     };
+    // Every frame is registered each round, so each round's model needs every frame's gain:
+    // no frame selection, however long the video.
+    build_opts.selection.max_frames = 0;
     if let Some(e) = fusion_exponent {
         build_opts.fusion.method =
             bronchosim::texture::fusion::FusionMethod::WeightedAverage { weight_exponent: e };
