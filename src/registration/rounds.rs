@@ -15,6 +15,7 @@ use super::frame::{FrameRegistrar, RegistrationOptions};
 use super::photometric::{ModelParts, RayGrid};
 use super::prior::MeasurementNoise;
 use super::video::{refine_video, VideoOptions, VideoRegistration};
+use crate::camera::Camera;
 use crate::image::Frame;
 use crate::math::Affine;
 use crate::Result;
@@ -98,8 +99,28 @@ impl Default for RoundOptions {
     }
 }
 
+/// The size of the frames the rounds' pyramid levels are set for (the demo phantom's 320x320
+/// frames).
+const REFERENCE_SIDE_PX: f64 = 320.0;
+
+/// How many pyramid levels a camera's size (the geometric mean of its sides) lies below
+/// [`REFERENCE_SIDE_PX`] (rounded, 0 when larger): the rounds' levels are counted from there,
+/// so that a level shows the airway at about the same scale whatever the frames' size.
+/// Registered at the reference's levels, 160x160 frames stopped their geometry rounds at 80
+/// pixels across and began them at 20, and the demo phantom's path at 160x160 with a 1.5 mm /
+/// 2 deg tracker's error ended at 0.755 deg median, 50 of 80 frames within 1 mm and 1 deg,
+/// its round trachea turned 1.3 deg off at the top (at 320x320: 0.284 deg, 78); counted from
+/// here, 0.572 deg and 78 (BENCHMARKS.md, session 31).
+pub fn levels_below_reference(camera: &Camera) -> usize {
+    let side = (f64::from(camera.width) * f64::from(camera.height))
+        .sqrt()
+        .max(1.0);
+    (REFERENCE_SIDE_PX / side).log2().round().max(0.0) as usize
+}
+
 /// Register `frames` (linear RGB, gains `gains` in the model's light, optional pixel `mask`)
-/// starting from `poses` against the model `parts`, as a round of `kind`.
+/// starting from `poses` against the model `parts`, as a round of `kind`. The pyramid levels
+/// of `opts` are counted from the reference frame size ([`levels_below_reference`]).
 pub fn register_round(
     parts: ModelParts,
     frames: &[Frame],
@@ -122,6 +143,9 @@ pub fn register_round(
             .max(opts.geometry_finest_level)
             .min(frame_opts.coarsest_level);
     }
+    let below = levels_below_reference(parts.camera);
+    frame_opts.coarsest_level = frame_opts.coarsest_level.saturating_sub(below);
+    frame_opts.finest_level = frame_opts.finest_level.saturating_sub(below);
     let reg = FrameRegistrar::new(parts, frame_opts)?;
     match kind {
         RoundKind::Texture => refine_video(&reg, frames, gains, mask, poses, &opts.video),
@@ -153,5 +177,42 @@ pub fn register_round(
             }
             refine_video(&reg, &normalised, gains, mask, poses, &video)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera(width: u32, height: u32) -> Camera {
+        Camera {
+            width,
+            height,
+            fx: f64::from(width),
+            fy: f64::from(width),
+            cx: f64::from(width) / 2.0,
+            cy: f64::from(height) / 2.0,
+            k1: 0.0,
+            k2: 0.0,
+            p1: 0.0,
+            p2: 0.0,
+            k3: 0.0,
+        }
+    }
+
+    #[test]
+    fn levels_are_counted_from_the_reference_frame_size() {
+        let below = |w, h| levels_below_reference(&camera(w, h));
+        // The demo's frames, and larger ones (registered reduced to ~320 across anyway).
+        assert_eq!(below(320, 320), 0);
+        assert_eq!(below(640, 640), 0);
+        // A 720p video registered at 320x180: 240 pixels' worth, nearer 320 than 160.
+        assert_eq!(below(320, 180), 0);
+        assert_eq!(below(256, 256), 0);
+        // The tests' small phantoms.
+        assert_eq!(below(160, 160), 1);
+        assert_eq!(below(128, 128), 1);
+        assert_eq!(below(80, 80), 2);
+        assert_eq!(below(1, 1), 8);
     }
 }
