@@ -235,8 +235,7 @@ fn tracker_errors_are_recovered_true_poses_kept_and_a_wrong_pose_flagged() {
     let first: Vec<Affine> = v.frames.iter().map(|f| f.pose).collect();
     let (mm_axis, deg_axis, _) = errors(&first, &truth);
     println!("the same smoothed per axis: {mm_axis:.3} mm {deg_axis:.3} deg");
-    // Measured: 0.41 mm / 1.29 deg against 0.39 mm / 2.02 deg (at the levels of 320-pixel
-    // frames, before session 31: 0.41 mm / 1.43 deg against 0.65 mm / 1.64 deg).
+    // Measured: 0.41 mm / 1.29 deg against 0.39 mm / 2.02 deg.
     assert!(
         deg < 0.8 * deg_axis && mm < 1.15 * mm_axis,
         "each frame's information {mm:.3} mm {deg:.3} deg, per axis {mm_axis:.3} mm {deg_axis:.3} deg"
@@ -521,10 +520,6 @@ fn build_repeats_a_geometry_round_that_leaves_many_outliers() {
     assert_eq!(kinds, ["geometry", "geometry"]);
     // Measured from 2.64 mm / 3.41 deg: 0.94 mm / 2.40 deg; without the repeat (geometry, then
     // texture: `registration_geometry_repeat_share` 1) 1.57 mm / 2.82 deg, which fails this.
-    // (With the levels of 320-pixel frames on these 160-pixel ones, before session 31: 1.11
-    // mm / 1.87 deg, and 2.32 mm / 2.86 deg without the repeat; the whole nine rounds on an
-    // 80-frame 160x160 phantom 3 mm / 4 deg off now end at 0.536 deg, 69 of 80 frames within
-    // 1 mm and 1 deg, against 1.360 deg and 35 then: BENCHMARKS.md.)
     assert!(mm < 0.5 * mm0 && deg < 0.75 * deg0, "{mm} mm {deg} deg");
 }
 

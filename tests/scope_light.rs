@@ -291,9 +291,7 @@ fn a_failed_first_round_is_run_again_from_the_poses_its_frames_agree_on() {
     assert!((results[0].1 .0 - given.0).abs() < 1e-9);
     // Measured from 2.64 mm / 3.41 deg median: the round converged on 7 of 24 frames, the
     // four runs from the agreement on 21, 21, 21 and 22, ending at 0.52 mm / 1.73 deg (the
-    // phantom's round trachea leaves the roll to the carina: much of the rotation stays). At
-    // the pyramid levels of 320-pixel frames, before session 31: 6, then 20, 21, 24 and 23,
-    // 0.33 mm / 2.16 deg.
+    // phantom's round trachea leaves the roll to the carina: much of the rotation stays).
     let (s, e, out) = &results[1];
     let reg = &s.registration;
     assert!(reg.consensus_start && !reg.lambert_lamp && reg.rounds.len() == 5);
