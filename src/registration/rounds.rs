@@ -183,26 +183,11 @@ pub fn register_round(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn camera(width: u32, height: u32) -> Camera {
-        Camera {
-            width,
-            height,
-            fx: f64::from(width),
-            fy: f64::from(width),
-            cx: f64::from(width) / 2.0,
-            cy: f64::from(height) / 2.0,
-            k1: 0.0,
-            k2: 0.0,
-            p1: 0.0,
-            p2: 0.0,
-            k3: 0.0,
-        }
-    }
+    use crate::phantom::case::phantom_camera;
 
     #[test]
     fn levels_are_counted_from_the_reference_frame_size() {
-        let below = |w, h| levels_below_reference(&camera(w, h));
+        let below = |w, h| levels_below_reference(&phantom_camera(w, h));
         // The demo's frames, and larger ones (registered reduced to ~320 across anyway).
         assert_eq!(below(320, 320), 0);
         assert_eq!(below(640, 640), 0);
