@@ -18,7 +18,7 @@ use std::path::Path;
 #[path = "common/untracked.rs"]
 mod untracked;
 use untracked::{
-    tracked_errors, untracked_phantom, untracked_phantom_jitter, untracked_phantom_paced,
+    tracked_errors, untracked_phantom, untracked_phantom_paced, untracked_phantom_sized,
 };
 
 fn phantom(dir: &Path, noise: PoseNoise) -> Case {
@@ -81,13 +81,13 @@ fn poses_first_tracks_the_video_from_one_pose() {
         "tracked {} of 48 (first lost {:?}); within 1 mm {within_mm}, within 1 mm and 1 deg {within_both}; {:.2} s per frame; errors {:?}",
         tracking.frames_tracked, tracking.first_lost, tracking.seconds_per_frame, errors
     );
-    // Measured: all 48 frames within 1 mm (median 0.34 mm), 7 also within 1 degree (1.4 deg
-    // median; the registration's rounds refine them in a build). Without each window's
-    // geometry round the view direction drifted with the texture: 25 within 1 mm, the track
-    // lost at frame 32.
+    // Measured: all 48 frames within 1 mm (median 0.35 mm), 21 also within 1 degree (1.1 deg
+    // median; the registration's rounds refine them in a build); with the tracker's pyramid
+    // levels those of 320-pixel frames, 7 (1.4 deg). Without each window's geometry round
+    // the view direction drifted with the texture: 25 within 1 mm, the track lost at frame 32.
     assert_eq!(within_mm, 48, "{within_mm} of 48 frames within 1 mm");
     assert!(
-        within_both >= 5,
+        within_both >= 18,
         "{within_both} of 48 frames within 1 mm and 1 degree"
     );
     assert_eq!((tracking.frames_tracked, tracking.first_lost), (48, None));
@@ -101,9 +101,11 @@ fn a_lost_track_resumes_from_the_frames_before_it_refined() {
     let case_dir = tmp.path().join("case");
     // The view direction swings up to 12 degrees (the built-in path's 4): the scope turns up
     // to 10 degrees between frames. The tracker's gate on a frame's turn at 10 degrees (its
-    // default, 20, tracks this path to the end; 14 and 15 degrees of swing too, 16 loses it
-    // at frame 5, before enough frames to refine) loses it, as the real airway trees did.
-    let truth = untracked_phantom_jitter(&case_dir, 22, 12.0);
+    // default, 20, tracks this path to the end) loses it, as it lost the real airway trees.
+    // At 256x256 the tracker runs the pyramid levels set for 320-pixel frames; at 128x128,
+    // counted from the frames' size, it tracks this path to the end at a gate of 10 degrees,
+    // and at 13-18 degrees of swing and gates of 6-10 loses it at frame 4 or never.
+    let truth = untracked_phantom_sized(&case_dir, 80, 22, 12.0, 256);
     let (t, tracked) = track_only(&case_dir, &tmp.path().join("reg"), |o| {
         o.tracking.track.max_jump_deg = 10.0
     });
@@ -113,15 +115,18 @@ fn a_lost_track_resumes_from_the_frames_before_it_refined() {
         t.frames_tracked, t.first_lost, t.resumed_at
     );
     // Measured: the track is lost at frame 15 (`TrackingOptions::resumes` 0: 15 frames within
-    // 1 mm, none after it); resumed there, frames 15-21 are within 0.2 mm (a sharp turn at
-    // frame 22 loses it again).
+    // 1 mm and 1.4 deg, the turn 11-74 deg off after it); resumed there, frames 15-21 are
+    // within 0.41 mm and 1.6 deg.
     let Some(&resumed_at) = t.resumed_at.first() else {
         panic!("the track was never lost: no sharp turn to resume after ({t:?})");
     };
-    let after = errors[resumed_at..].iter().filter(|e| e.0 <= 1.0).count();
+    let after = errors[resumed_at..]
+        .iter()
+        .filter(|e| e.0 <= 1.0 && e.1 <= 2.0)
+        .count();
     assert!(
-        after >= 5,
-        "{after} of the {} frames from the resume at {resumed_at} within 1 mm",
+        after >= 6,
+        "{after} of the {} frames from the resume at {resumed_at} within 1 mm and 2 deg",
         22 - resumed_at
     );
     assert_eq!(
@@ -166,8 +171,8 @@ fn a_video_over_the_budget_is_tracked_densely_and_the_budget_chosen_once_tracked
         scene.frame_numbers, record.counts, record.cells_seen_used, record.cells_seen_all
     );
     // Once tracked, the budget's frames are chosen by the wall they see from their tracked
-    // poses, the first kept. Measured: frames 0, 1, 3, 17, 23, 27, 49, 51, 53, 57; the 30
-    // tracked frames see 5,094 wall cells, the chosen 4,408 of them (87%).
+    // poses, the first kept. Measured: frames 0, 3, 17, 23, 27, 34, 49, 51, 53, 59; the 30
+    // tracked frames see 5,089 wall cells, the chosen 4,453 of them (87%).
     assert_eq!(scene.frame_count(), 10, "{:?}", scene.frame_numbers);
     assert_eq!(scene.frame_numbers[0], 0);
     assert!(scene.frame_numbers[9] >= 28, "{:?}", scene.frame_numbers);

@@ -13,24 +13,32 @@ use std::path::Path;
 /// Write the case into `case_dir` with its first `kept` frames (128x128); returns their true
 /// poses.
 pub fn untracked_phantom(case_dir: &Path, kept: usize) -> Vec<Affine> {
-    untracked_phantom_jitter(case_dir, kept, PathOptions::default().jitter_deg)
+    untracked_phantom_paced(case_dir, 80, kept, PathOptions::default().jitter_deg)
 }
 
-pub fn untracked_phantom_jitter(case_dir: &Path, kept: usize, jitter_deg: f64) -> Vec<Affine> {
-    untracked_phantom_paced(case_dir, 80, kept, jitter_deg)
-}
-
-/// The same with `frames` frames over the whole path (80: the demo's pace).
+/// The same with `frames` frames over the whole path (80: the demo's pace), the view
+/// direction swinging up to `jitter_deg`.
 pub fn untracked_phantom_paced(
     case_dir: &Path,
     frames: usize,
     kept: usize,
     jitter_deg: f64,
 ) -> Vec<Affine> {
+    untracked_phantom_sized(case_dir, frames, kept, jitter_deg, 128)
+}
+
+/// The same with `side` x `side` frames.
+pub fn untracked_phantom_sized(
+    case_dir: &Path,
+    frames: usize,
+    kept: usize,
+    jitter_deg: f64,
+    side: u32,
+) -> Vec<Affine> {
     let opts = PhantomOptions {
         frames,
-        width: 128,
-        height: 128,
+        width: side,
+        height: side,
         novel_views: 1,
         path: PathOptions {
             jitter_deg,
