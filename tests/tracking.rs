@@ -1,5 +1,6 @@
 //! Registration without a tracker (`--poses first`, issue 16 item 5) and the registration
-//! report's before/after overlays (item 3), on a small phantom (24 frames, 160x160).
+//! report's before/after overlays (item 3), on small phantoms (up to 60 frames, 128x128 to
+//! 256x256).
 
 use bronchosim::image::Frame;
 use bronchosim::io::case::Case;
@@ -107,7 +108,7 @@ fn a_lost_track_resumes_from_the_frames_before_it_refined() {
     // refused loses the track here (its default, 3, lets frame 17 through a gate widened by
     // the frames since the last accepted one). At 256x256 the tracker runs the pyramid
     // levels set for 320-pixel frames; at 128x128, counted from the frames' size, it refuses
-    // none of this path at 10 degrees, and at 13-18 degrees of swing loses it from frame 4.
+    // none of this path at 10 degrees.
     let truth = untracked_phantom_sized(&case_dir, 80, 22, 12.0, 256);
     let (t, tracked) = track_only(&case_dir, &tmp.path().join("reg"), |o| {
         o.tracking.track.max_jump_deg = 10.0;

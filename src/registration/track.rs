@@ -6,10 +6,10 @@
 //!
 //! A frame is accepted when its registration converged, its cost lies within `cost_ratio`
 //! of the accepted frames' recent costs, and it moved no further from the prediction, or from
-//! the last accepted pose, than a bronchoscope moves in the frames since that pose. A frame that is not
-//! accepted is flagged (its pose is the prediction) and tracking continues from the last
-//! accepted poses; after `lost_after` flagged frames in a row the track is lost from the
-//! first of them, and every later frame is still tried from the last accepted poses (the
+//! the last accepted pose, than a bronchoscope moves in the frames since that pose. A frame
+//! that is not accepted is flagged (its pose is the prediction) and tracking continues from
+//! the last accepted poses; after `lost_after` flagged frames in a row the track is lost from
+//! the first of them, and every later frame is still tried from the last accepted poses (the
 //! track may be found again, but the report names the first frame lost).
 
 use super::chroma::ChromaAlbedo;
