@@ -28,5 +28,5 @@ pub use frame::{FrameObs, FrameRegistrar, FrameRegistration, FrameStatus, Regist
 pub use photometric::{ModelParts, PhotometricModel};
 pub use pose::{apply_delta, delta_between, pose_error, pose_error_axes, PoseDelta};
 pub use rounds::{register_round, RoundKind, RoundOptions};
-pub use track::{TrackOptions, TrackState, Tracker};
+pub use track::{interpolate_flagged, TrackOptions, TrackState, Tracker};
 pub use video::{refine_video, VideoOptions, VideoRegistration};

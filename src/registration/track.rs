@@ -186,6 +186,23 @@ pub fn extrapolate(pa: &Affine, a: f64, pb: &Affine, b: f64, f: f64) -> Affine {
     pose_from(&orthonormalise(&r), &c)
 }
 
+/// The poses of the frames `flagged` that lie between two frames not flagged, on the motion
+/// between those two (centre linear, rotation along the geodesic) at their frame numbers
+/// `times`. A frame the tracker could not register keeps its prediction, extrapolated from
+/// the frames before it: two black frames ended 0.9 mm / 3.0 deg and 2.1 mm / 9.1 deg off,
+/// between their neighbours 0.36 mm / 2.9 deg and 0.29 mm / 2.3 deg (`tests/tracking.rs`,
+/// `a_blackout_of_two_frames_is_crossed`).
+pub fn interpolate_flagged(poses: &mut [Affine], flagged: &[bool], times: &[usize]) {
+    let kept: Vec<usize> = (0..poses.len()).filter(|&i| !flagged[i]).collect();
+    for w in kept.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let (ta, tb) = (times[a] as f64, times[b] as f64);
+        for i in a + 1..b {
+            poses[i] = extrapolate(&poses[a], ta, &poses[b], tb, times[i] as f64);
+        }
+    }
+}
+
 /// A model to track frames against: the geometry's shading under the light, each frame
 /// divided by the albedo its colour predicts.
 pub struct Tracker<'a> {
@@ -346,5 +363,34 @@ impl TrackState {
                 self.first_lost = Some(f + 1 - lost_after);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Vector3;
+
+    fn pose_at(x: f64, turn_deg: f64) -> Affine {
+        let r = Rotation3::new(Vector3::new(0.0, 0.0, turn_deg.to_radians())).into_inner();
+        pose_from(&r, &Vector3::new(x, 0.0, 0.0))
+    }
+
+    #[test]
+    fn flagged_frames_between_kept_ones_lie_on_their_motion() {
+        // Frames numbered 0, 1, 2, 4, 5: frames 1 and 2 flagged between 0 and 4, frame 5
+        // flagged after the last kept one.
+        let times = [0, 1, 2, 4, 5];
+        let flagged = [false, true, true, false, true];
+        let wild = pose_at(50.0, 90.0);
+        let mut poses = [pose_at(0.0, 0.0), wild, wild, pose_at(8.0, 40.0), wild];
+        interpolate_flagged(&mut poses, &flagged, &times);
+        for (i, x, deg) in [(1, 2.0, 10.0), (2, 4.0, 20.0)] {
+            let d = delta_between(&pose_at(x, deg), &poses[i]);
+            assert!(d.mm() < 1e-9 && d.deg() < 1e-9, "frame {i}: {d:?}");
+        }
+        assert_eq!(poses[0], pose_at(0.0, 0.0));
+        assert_eq!(poses[3], pose_at(8.0, 40.0));
+        assert_eq!(poses[4], wild, "no kept frame after it: left as it was");
     }
 }

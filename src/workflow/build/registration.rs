@@ -48,9 +48,9 @@ use crate::math::Affine;
 use crate::model::registration::{FramePoseResult, PoseOverlay, PoseRegistration, RoundSummary};
 use crate::model::selection::FrameSelection;
 use crate::registration::{
-    blocks::BlockOptions, consensus::consensus_poses, delta_between, register_round,
-    FrameRegistration, FrameStatus, ModelParts, RegistrationOptions, RoundKind, RoundOptions,
-    TrackState, VideoOptions, VideoRegistration,
+    blocks::BlockOptions, consensus::consensus_poses, delta_between, interpolate_flagged,
+    register_round, FrameRegistration, FrameStatus, ModelParts, RegistrationOptions, RoundKind,
+    RoundOptions, TrackState, VideoOptions, VideoRegistration,
 };
 use crate::render::{MipOptions, MipTexture};
 use crate::shading::calibrated::{
@@ -154,6 +154,12 @@ pub fn register_poses(
     if kept_given && first {
         // The tracked poses are kept: so are the tracker's verdicts on them.
         statuses = tracked;
+    }
+    if first {
+        // A flagged frame between two kept ones is placed between them, not left at the
+        // tracker's prediction (it is left out of the model either way).
+        let flagged: Vec<bool> = statuses.iter().map(|s| s.1).collect();
+        interpolate_flagged(&mut scene.poses, &flagged, &scene.frame_numbers);
     }
     let results: Vec<FramePoseResult> = statuses
         .into_iter()
