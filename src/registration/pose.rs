@@ -63,6 +63,17 @@ pub fn apply_delta(pose: &Affine, delta: &PoseDelta) -> Affine {
     pose_from(&orthonormalise(&r), &c)
 }
 
+/// The pose at time `f` on the constant-velocity motion through `pa` (at time `a`) and `pb`
+/// (at time `b`, `a < b`).
+pub fn extrapolate(pa: &Affine, a: f64, pb: &Affine, b: f64, f: f64) -> Affine {
+    let t = (f - a) / (b - a);
+    let (ra, rb) = (rotation_of(pa), rotation_of(pb));
+    let w = rotation_log(&(rb * ra.transpose()));
+    let r = Rotation3::new(w * t).into_inner() * ra;
+    let c = camera_centre(pa).coords * (1.0 - t) + camera_centre(pb).coords * t;
+    pose_from(&orthonormalise(&r), &c)
+}
+
 /// The correction that takes `from` to `to` (inverse of [`apply_delta`]).
 pub fn delta_between(from: &Affine, to: &Affine) -> PoseDelta {
     let dr = rotation_of(to) * rotation_of(from).transpose();

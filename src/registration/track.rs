@@ -16,11 +16,10 @@ use super::chroma::ChromaAlbedo;
 use super::frame::RegistrationOptions;
 use super::frame::{FrameObs, FrameRegistrar, FrameRegistration, FrameStatus};
 use super::photometric::{ModelParts, RayGrid};
-use super::pose::{delta_between, orthonormalise, pose_from, rotation_log, rotation_of};
+use super::pose::{delta_between, extrapolate};
 use super::rounds::levels_below_reference;
-use crate::camera::pose::camera_centre;
 use crate::image::Frame;
-use crate::math::{Affine, Rotation3};
+use crate::math::Affine;
 use crate::Result;
 
 /// Options of [`Tracker`].
@@ -173,17 +172,6 @@ impl TrackState {
         c.sort_by(f64::total_cmp);
         Some(c[c.len() / 2])
     }
-}
-
-/// The pose at time `f` on the constant-velocity motion through `pa` (at time `a`) and `pb`
-/// (at time `b`, `a < b`).
-pub fn extrapolate(pa: &Affine, a: f64, pb: &Affine, b: f64, f: f64) -> Affine {
-    let t = (f - a) / (b - a);
-    let (ra, rb) = (rotation_of(pa), rotation_of(pb));
-    let w = rotation_log(&(rb * ra.transpose()));
-    let r = Rotation3::new(w * t).into_inner() * ra;
-    let c = camera_centre(pa).coords * (1.0 - t) + camera_centre(pb).coords * t;
-    pose_from(&orthonormalise(&r), &c)
 }
 
 /// The poses of the frames `flagged` that lie between two frames not flagged, on the motion
@@ -369,7 +357,8 @@ impl TrackState {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::Vector3;
+    use crate::math::{Rotation3, Vector3};
+    use crate::registration::pose::pose_from;
 
     fn pose_at(x: f64, turn_deg: f64) -> Affine {
         let r = Rotation3::new(Vector3::new(0.0, 0.0, turn_deg.to_radians())).into_inner();

@@ -8,11 +8,10 @@
 
 use super::blocks::{realign_blocks, BlockOptions};
 use super::frame::{FrameObs, FrameRegistrar, FrameRegistration, FrameStatus};
-use super::pose::{apply_delta, delta_between, rotation_log, rotation_of, PoseDelta};
+use super::pose::{apply_delta, delta_between, extrapolate, rotation_of, PoseDelta};
 use super::prior::{smooth_corrections, DriftPrior};
-use crate::camera::pose::camera_centre;
 use crate::image::Frame;
-use crate::math::{Affine, Rotation3};
+use crate::math::Affine;
 use crate::{Error, Result};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -142,12 +141,7 @@ fn interpolate_pose(p: &[Affine], ok: &[bool], f: usize) -> Option<Affine> {
         (None, Some(b)) => (b, (b + 1..ok.len()).find(|&i| ok[i])?),
         (None, None) => return None,
     };
-    let t = (f as f64 - a as f64) / (b as f64 - a as f64);
-    let (ra, rb) = (rotation_of(&p[a]), rotation_of(&p[b]));
-    let w = rotation_log(&(rb * ra.transpose()));
-    let r = Rotation3::new(w * t).into_inner() * ra;
-    let c = camera_centre(&p[a]).coords * (1.0 - t) + camera_centre(&p[b]).coords * t;
-    Some(super::pose::pose_from(&super::pose::orthonormalise(&r), &c))
+    Some(extrapolate(&p[a], a as f64, &p[b], b as f64, f as f64))
 }
 
 /// Mark the frames that did not converge (`ok[f]` false) as high-cost and those whose
