@@ -172,6 +172,29 @@ pub struct TrackingSummary {
     pub seconds: f64,
     /// The same per tracked frame (s).
     pub seconds_per_frame: f64,
+    /// The first frame's pose refined against the CT before tracking (`None`: trusted as
+    /// given, `--trust-first-pose`).
+    #[serde(default)]
+    pub first_pose: Option<FirstPoseRefinement>,
+}
+
+/// The first frame's given pose registered against the CT's geometry before tracking starts
+/// from it (`--poses first`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FirstPoseRefinement {
+    /// How its registration ended (`converged`, `too_few_points`, ...).
+    pub status: String,
+    /// The refined pose was kept (it converged and lowered the cost); else tracking started
+    /// from the given pose.
+    pub kept: bool,
+    /// The move from the given pose (mm; 0 when not kept).
+    pub correction_mm: f64,
+    /// The same (degrees).
+    pub correction_deg: f64,
+    /// Mean robust cost against the geometry's shading at the given pose.
+    pub cost_given: f64,
+    /// The same at the refined pose.
+    pub cost_refined: f64,
 }
 
 /// One frame shown on the model at its given and at its registered pose (the reports'

@@ -235,6 +235,25 @@ impl<'a> Tracker<'a> {
         })
     }
 
+    /// Register frame `f` alone from `from` at gain `gain`, with no prediction and no gate:
+    /// the first frame's pose, given only roughly, refined before tracking starts from it.
+    pub fn register_alone(
+        &self,
+        frames: &[Frame],
+        mask: Option<&[bool]>,
+        f: usize,
+        from: &Affine,
+        gain: f64,
+    ) -> Result<FrameRegistration> {
+        let frame = self.prepare(&frames[f]);
+        let obs = FrameObs {
+            frame: &frame,
+            gain,
+            mask,
+        };
+        self.reg.refine_frame(&obs, from)
+    }
+
     /// The frame as registered: divided by its colour's albedo when not against texture.
     fn prepare<'f>(&self, frame: &'f Frame) -> std::borrow::Cow<'f, Frame> {
         match &self.chroma {

@@ -220,8 +220,21 @@ pub(crate) fn tracking_html(t: &TrackingSummary) -> String {
         None if resumed.is_empty() => "the track was never lost".to_string(),
         None => format!("{resumed}it then held to the end"),
     };
+    let first = match &t.first_pose {
+        None => "trusted as given".to_string(),
+        Some(f) if f.kept => format!(
+            "refined against the CT first, {:.2} mm / {:.2} deg from the given pose",
+            f.correction_mm, f.correction_deg
+        ),
+        Some(f) => format!(
+            "which could not be refined against the CT, {}, and was used as given",
+            f.status
+        ),
+    };
     format!(
-        "<p>Tracked from the first frame's pose alone: {} of {} frames accepted; {lost};          {} fits of the light; {:.2} s per frame. The corrections below are from the tracked          poses.</p>",
+        "<p>Tracked from the first frame's pose alone ({first}): {} of {} frames accepted; \
+         {lost}; {} fits of the light; {:.2} s per frame. The corrections below are from the \
+         tracked poses.</p>",
         t.frames_tracked, t.frames, t.light_fits, t.seconds_per_frame
     )
 }

@@ -98,7 +98,15 @@ fn registration_line(reg: &PoseRegistration) -> String {
     let mid = mm.len() / 2;
     let tracked = reg.tracking.as_ref().map_or(String::new(), |t| {
         format!(
-            "  tracked from the first pose: {} of {} frames, {}, {:.2} s per frame\n",
+            "  tracked from the first pose{}: {} of {} frames, {}, {:.2} s per frame\n",
+            match &t.first_pose {
+                Some(f) if f.kept => format!(
+                    " (refined {:.2} mm / {:.2} deg against the CT)",
+                    f.correction_mm, f.correction_deg
+                ),
+                Some(f) => format!(" (not refined: {})", f.status),
+                None => " (trusted as given)".to_string(),
+            },
             t.frames_tracked,
             t.frames,
             match (t.first_lost, t.resumed_at.is_empty()) {

@@ -245,6 +245,11 @@ pub struct BuildArgs {
     /// then refine them.
     #[arg(long, value_enum, default_value_t = build_defaults().poses)]
     pub poses: PosesMode,
+    /// With `--poses first`: trust the first frame's pose exactly (e.g. from another
+    /// registration) instead of refining it against the CT before tracking, as a pose aligned
+    /// by hand needs.
+    #[arg(long)]
+    pub trust_first_pose: bool,
     /// Most rounds of the registration (light + texture, then every frame's pose); rounds
     /// 0, N, 2N, ... (N = --geometry-every) register against the CT's geometry alone, and so
     /// does the round after a geometry round that leaves over a fifth of the frames outliers;
@@ -295,6 +300,11 @@ pub struct RegisterArgs {
     /// (0 rounds: tracking alone). `fixed` is refused: there would be nothing to do.
     #[arg(long, value_enum, default_value_t = PosesMode::Refine)]
     pub poses: PosesMode,
+    /// With `--poses first`: trust the first frame's pose exactly (e.g. from another
+    /// registration) instead of refining it against the CT before tracking, as a pose aligned
+    /// by hand needs.
+    #[arg(long)]
+    pub trust_first_pose: bool,
     /// The calibrated light of a model built with the same bronchoscope (its folder or its
     /// shading.json): the registration's first round registers against that light's shape,
     /// with this video's gains, instead of a light fitted at the given poses, which follows

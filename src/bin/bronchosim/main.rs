@@ -94,6 +94,7 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
         ..Default::default()
     };
     opts.selection.max_frames = a.max_frames;
+    opts.tracking.refine_first = !a.trust_first_pose;
     opts.atlas.texel_mm = a.texel_mm;
     opts.segment.mesh.decimate.target_edge_mm = a.edge_mm;
     opts.calibrated.ambient = a.ambient;
@@ -132,7 +133,7 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
 }
 
 fn register(a: RegisterArgs, quiet: bool) -> anyhow::Result<String> {
-    let opts = BuildOptions {
+    let mut opts = BuildOptions {
         force: a.force,
         quiet,
         registration_rounds: a.rounds,
@@ -142,6 +143,7 @@ fn register(a: RegisterArgs, quiet: bool) -> anyhow::Result<String> {
         scope_light: a.scope_light.as_deref().map(read_scope_light).transpose()?,
         ..Default::default()
     };
+    opts.tracking.refine_first = !a.trust_first_pose;
     let s = register_command(&a.case, &a.out, &opts)
         .with_context(|| format!("register {}", a.case.display()))?;
     for w in &s.warnings {

@@ -14,7 +14,7 @@ use super::registration::{
 use super::scene::BuildScene;
 use crate::camera::Camera;
 use crate::math::Affine;
-use crate::model::registration::TrackingSummary;
+use crate::model::registration::{FirstPoseRefinement, TrackingSummary};
 use crate::registration::pose::rotation_of;
 use crate::registration::{
     apply_delta, delta_between, register_round, FrameStatus, ModelParts, RoundKind, RoundOptions,
@@ -65,6 +65,16 @@ pub struct TrackingOptions {
     /// at 2 mm between them (ATM_307, 160 frames, budget 80: lost at frame 80) that twice as
     /// many held to its end (BENCHMARKS.md, session 30).
     pub tracked_per_used: usize,
+    /// Refine the first frame's given pose against the CT's geometry before tracking from it
+    /// ([`refine_first_pose`]; off: trusted exactly, `--trust-first-pose`). A first pose
+    /// aligned by hand is rarely better than a millimetre and a degree, and tracking follows
+    /// its error: on the demo phantom's video, from a first pose 1 mm / 1 deg off, 1.40 deg
+    /// median and 26 of 80 frames within 1 mm and 1 deg trusted, 0.42 deg and 74 refined;
+    /// from 2 mm / 2 deg the track was lost at once trusted, 0.95 deg and 80 frames within
+    /// 1 mm refined. From the exact pose the refinement moves it 0.3 mm / 0.9 deg (one frame's
+    /// geometry trades a turn for a shift) and the video ends at 0.37 deg median, against
+    /// 0.22 (BENCHMARKS.md, session 33).
+    pub refine_first: bool,
 }
 
 impl Default for TrackingOptions {
@@ -79,21 +89,22 @@ impl Default for TrackingOptions {
             resume_frames: 32,
             resume_rounds: 9,
             tracked_per_used: 2,
+            refine_first: true,
         }
     }
 }
 
-/// The light and consensus texture fitted on the frames `fit_on` at their tracked poses (the
-/// latest frame's gain is 1 in the light: the next frames are tracked from it).
+/// The light and consensus texture fitted on the frames `fit_on` at `poses` (one per frame of
+/// the scene; the latest frame's gain is 1 in the light: the next frames are tracked from it).
 fn fit_model(
     scene: &mut BuildScene,
-    state: &TrackState,
+    poses: &[Affine],
     fit_on: &[usize],
     opts: &BuildOptions,
     warnings: &mut Vec<String>,
 ) -> Result<(CalibratedModel, MipTexture)> {
     for &i in fit_on {
-        scene.poses[i] = state.poses[i];
+        scene.poses[i] = poses[i];
     }
     let fit_opts = BuildOptions {
         calibrated_reference: Some(fit_on.len() - 1),
@@ -123,7 +134,14 @@ pub(super) fn track_poses(
     let started = Instant::now();
     let t = &opts.tracking;
     let n = scene.frame_count();
+    let first_pose = match t.refine_first && scene.frame_numbers.first() == Some(&0) {
+        true => Some(refine_first_pose(scene, view, opts, warnings)?),
+        false => None,
+    };
     let mut state = TrackState::new(&scene.frame_numbers, scene.poses[0], 1.0);
+    if let Some((status, true)) = first_pose.as_ref().map(|r| (r.status, r.summary.kept)) {
+        state.status[0] = Some(status);
+    }
     let mut fits = 0;
     let mut resumed_at: Vec<usize> = Vec::new();
     let mut light = None;
@@ -171,12 +189,82 @@ pub(super) fn track_poses(
         light_fits: fits,
         seconds,
         seconds_per_frame: seconds / (n.max(2) - 1) as f64,
+        first_pose: first_pose.map(|r| r.summary),
     };
     let light = match light {
         Some(l) => l,
         None => round_light(scene, opts, warnings)?,
     };
     Ok((state, summary, light))
+}
+
+/// The first frame's refinement and how its registration ended.
+struct FirstPose {
+    summary: FirstPoseRefinement,
+    status: FrameStatus,
+}
+
+/// The first frame's given pose registered against the CT's geometry (its shading under the
+/// light fitted on that frame at the given pose, the frame divided by the albedo its colour
+/// predicts, as the tracker registers the frames before any texture exists); the scene's first
+/// pose becomes the refined one when it converged and lowered the cost.
+///
+/// Alone, one frame's geometry is ambiguous where a turn and a shift move its image alike
+/// (about 0.3 mm / 0.9 deg from the exact pose on the demo phantom), and a round airway does
+/// not fix the roll: the refinement is coarse. The roll is refined all the same: kept as
+/// given, from a first pose 1 mm / 1 deg off about a skew axis, the demo's video ended at
+/// 0.57 deg median, refined 0.41 (BENCHMARKS.md, session 33).
+fn refine_first_pose(
+    scene: &mut BuildScene,
+    view: &RegistrationView,
+    opts: &BuildOptions,
+    warnings: &mut Vec<String>,
+) -> Result<FirstPose> {
+    let given = scene.poses[0];
+    let poses = scene.poses.clone();
+    let (light, texture) = fit_model(scene, &poses, &[0], opts, warnings)?;
+    let parts = ModelParts {
+        scene: &scene.scene,
+        tri_uv: &scene.tri_uv,
+        texture: Some(&texture),
+        light: &light,
+        camera: &view.camera,
+    };
+    let geometry = TrackOptions {
+        against_texture: false,
+        ..opts.tracking.track.clone()
+    };
+    let tracker = Tracker::new(parts, &[given], &geometry)?;
+    let r = tracker.register_alone(&view.frames, view.mask.as_deref(), 0, &given, 1.0)?;
+    let kept = matches!(r.status, FrameStatus::Converged | FrameStatus::NotConverged)
+        && r.cost_after < r.cost_before;
+    let moved = delta_between(&given, &r.pose);
+    if kept {
+        scene.poses[0] = r.pose;
+    } else {
+        warnings.push(format!(
+            "the first frame's pose could not be refined against the CT ({}{}); tracking starts from it as given",
+            r.status.name(),
+            match r.status {
+                FrameStatus::Converged | FrameStatus::NotConverged => format!(
+                    ", cost {:.3} at the given pose, {:.3} at the refined one",
+                    r.cost_before, r.cost_after
+                ),
+                _ => String::new(),
+            }
+        ));
+    }
+    Ok(FirstPose {
+        summary: FirstPoseRefinement {
+            status: r.status.name().to_string(),
+            kept,
+            correction_mm: if kept { moved.mm() } else { 0.0 },
+            correction_deg: if kept { moved.deg() } else { 0.0 },
+            cost_given: r.cost_before,
+            cost_refined: r.cost_after,
+        },
+        status: r.status,
+    })
 }
 
 /// The registration's rounds on the last `TrackingOptions::resume_frames` frames accepted
@@ -250,7 +338,7 @@ fn track_from(
         if let Some((light, texture)) = &last_model {
             correct_window(scene, view, state, next, light, texture, t.window_geometry)?;
         }
-        let (light, texture) = fit_model(scene, state, &fit_on, opts, warnings)?;
+        let (light, texture) = fit_model(scene, &state.poses, &fit_on, opts, warnings)?;
         *fits += 1;
         for (k, &i) in fit_on.iter().enumerate() {
             state.gains[i] = light.gains[k];
