@@ -153,10 +153,8 @@ fn tracking_from_the_first_pose_in_the_scope_light_keeps_the_view_direction() {
         "tracked {} of 20 (first lost {:?}); within 1 mm {within_mm}, within 1 mm and 1 deg {within_both}; errors {errors:?}",
         tracking.frames_tracked, tracking.first_lost
     );
-    // Measured: all 20 within 1 mm, 16 also within 1 degree (0.66 deg median; frames 5-7
-    // and 16 1.1-1.2 deg off). The first pose, exact here, is refined against the CT before
-    // tracking and ends 0.27 mm / 0.78 deg off; trusted as given (`--trust-first-pose`),
-    // 16 (0.42 deg median). With the light fitted on the tracked frames 10. Before each window of
+    // Measured: all 20 within 1 mm, 16 also within 1 degree (0.42 deg median; frames 5-8
+    // 1.1-1.3 deg off); with the light fitted on the tracked frames 10. Before each window of
     // frames was registered again against the geometry, 17 of 20, drifting 0.11 deg per frame
     // in the view direction. With the tracker's pyramid levels those of 320-pixel frames,
     // 20 of 20 (0.39 deg).

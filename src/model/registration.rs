@@ -184,8 +184,8 @@ pub struct TrackingSummary {
 pub struct FirstPoseRefinement {
     /// How its registration ended (`converged`, `too_few_points`, ...).
     pub status: String,
-    /// The refined pose was kept (it converged and lowered the cost); else tracking started
-    /// from the given pose.
+    /// The refined pose was kept (it converged and lowered the cost by the share the build
+    /// asks for); else tracking started from the given pose.
     pub kept: bool,
     /// The move from the given pose (mm; 0 when not kept).
     pub correction_mm: f64,

@@ -226,8 +226,12 @@ pub(crate) fn tracking_html(t: &TrackingSummary) -> String {
             "refined against the CT first, {:.2} mm / {:.2} deg from the given pose",
             f.correction_mm, f.correction_deg
         ),
+        Some(f) if f.status == "converged" || f.status == "not_converged" => format!(
+            "used as given: refined against the CT it fitted the frame {:.0} % better",
+            100.0 * (1.0 - f.cost_refined / f.cost_given)
+        ),
         Some(f) => format!(
-            "which could not be refined against the CT, {}, and was used as given",
+            "used as given: it could not be refined against the CT, {}",
             f.status
         ),
     };

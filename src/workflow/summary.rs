@@ -104,7 +104,11 @@ fn registration_line(reg: &PoseRegistration) -> String {
                     " (refined {:.2} mm / {:.2} deg against the CT)",
                     f.correction_mm, f.correction_deg
                 ),
-                Some(f) => format!(" (not refined: {})", f.status),
+                Some(f) => format!(
+                    " (given: refined it fitted {:.0} % better, {})",
+                    100.0 * (1.0 - f.cost_refined / f.cost_given),
+                    f.status
+                ),
                 None => " (trusted as given)".to_string(),
             },
             t.frames_tracked,

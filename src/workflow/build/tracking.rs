@@ -68,13 +68,18 @@ pub struct TrackingOptions {
     /// Refine the first frame's given pose against the CT's geometry before tracking from it
     /// ([`refine_first_pose`]; off: trusted exactly, `--trust-first-pose`). A first pose
     /// aligned by hand is rarely better than a millimetre and a degree, and tracking follows
-    /// its error: on the demo phantom's video, from a first pose 1 mm / 1 deg off, 1.40 deg
-    /// median and 26 of 80 frames within 1 mm and 1 deg trusted, 0.42 deg and 74 refined;
-    /// from 2 mm / 2 deg the track was lost at once trusted, 0.95 deg and 80 frames within
-    /// 1 mm refined. From the exact pose the refinement moves it 0.3 mm / 0.9 deg (one frame's
-    /// geometry trades a turn for a shift) and the video ends at 0.37 deg median, against
-    /// 0.22 (BENCHMARKS.md, session 33).
+    /// its error. Demo phantom's video, first pose 1 mm / 1 deg off: trusted 0.53 deg median,
+    /// 62 of 80 frames within 1 mm and 1 deg, new views 28.49 dB; refined 0.41 deg, 71, 29.24
+    /// dB. 2 mm / 2 deg off: trusted, lost at frame 20 (17.10 dB); refined, 0.83 deg, 28.29 dB
+    /// (BENCHMARKS.md, session 33).
     pub refine_first: bool,
+    /// The refined first pose is kept when it lowers the frame's cost against the geometry by
+    /// at least this share; else the given pose agrees with the CT as far as one frame's
+    /// geometry can tell, and is kept. From the exact pose the refinement lowered the cost by
+    /// 2-3 % (demo phantom and its path at 160x160) and cost 1.2 dB of new views on the demo
+    /// (30.75 -> 29.53 dB); from 0.5 mm / 0.5 deg off by 29 %, from 1 mm / 1 deg off by 31-45 %
+    /// (BENCHMARKS.md, session 33).
+    pub first_pose_min_cost_drop: f64,
 }
 
 impl Default for TrackingOptions {
@@ -90,6 +95,7 @@ impl Default for TrackingOptions {
             resume_rounds: 9,
             tracked_per_used: 2,
             refine_first: true,
+            first_pose_min_cost_drop: 0.1,
         }
     }
 }
@@ -207,7 +213,8 @@ struct FirstPose {
 /// The first frame's given pose registered against the CT's geometry (its shading under the
 /// light fitted on that frame at the given pose, the frame divided by the albedo its colour
 /// predicts, as the tracker registers the frames before any texture exists); the scene's first
-/// pose becomes the refined one when it converged and lowered the cost.
+/// pose becomes the refined one when it converged and lowered the cost by
+/// `TrackingOptions::first_pose_min_cost_drop` or more.
 ///
 /// Alone, one frame's geometry is ambiguous where a turn and a shift move its image alike
 /// (about 0.3 mm / 0.9 deg from the exact pose on the demo phantom), and a round airway does
@@ -236,22 +243,17 @@ fn refine_first_pose(
     };
     let tracker = Tracker::new(parts, &[given], &geometry)?;
     let r = tracker.register_alone(&view.frames, view.mask.as_deref(), 0, &given, 1.0)?;
-    let kept = matches!(r.status, FrameStatus::Converged | FrameStatus::NotConverged)
-        && r.cost_after < r.cost_before;
+    let converged = matches!(r.status, FrameStatus::Converged | FrameStatus::NotConverged)
+        && r.cost_after.is_finite();
+    let drop = opts.tracking.first_pose_min_cost_drop;
+    let kept = converged && r.cost_after < (1.0 - drop) * r.cost_before;
     let moved = delta_between(&given, &r.pose);
     if kept {
         scene.poses[0] = r.pose;
-    } else {
+    } else if !converged {
         warnings.push(format!(
-            "the first frame's pose could not be refined against the CT ({}{}); tracking starts from it as given",
-            r.status.name(),
-            match r.status {
-                FrameStatus::Converged | FrameStatus::NotConverged => format!(
-                    ", cost {:.3} at the given pose, {:.3} at the refined one",
-                    r.cost_before, r.cost_after
-                ),
-                _ => String::new(),
-            }
+            "the first frame's pose could not be refined against the CT ({}); tracking starts from it as given",
+            r.status.name()
         ));
     }
     Ok(FirstPose {
