@@ -197,6 +197,28 @@ pub struct FirstPoseRefinement {
     pub cost_refined: f64,
 }
 
+impl TrackingSummary {
+    /// What became of the first frame's given pose, in words (reports and the command's
+    /// summary).
+    pub fn first_pose_words(&self) -> String {
+        match &self.first_pose {
+            None => "trusted as given".to_string(),
+            Some(f) if f.kept => format!(
+                "refined against the CT first, {:.2} mm / {:.2} deg from the given pose",
+                f.correction_mm, f.correction_deg
+            ),
+            Some(f) if f.cost_refined.is_finite() && f.cost_given > 0.0 => format!(
+                "used as given: refined against the CT it fitted the frame {:.0} % better",
+                100.0 * (1.0 - f.cost_refined / f.cost_given)
+            ),
+            Some(f) => format!(
+                "used as given: it could not be refined against the CT ({})",
+                f.status
+            ),
+        }
+    }
+}
+
 /// One frame shown on the model at its given and at its registered pose (the reports'
 /// before/after overlays; `workflow::registration_overlays`).
 #[derive(Clone, Debug)]

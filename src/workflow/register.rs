@@ -220,21 +220,7 @@ pub(crate) fn tracking_html(t: &TrackingSummary) -> String {
         None if resumed.is_empty() => "the track was never lost".to_string(),
         None => format!("{resumed}it then held to the end"),
     };
-    let first = match &t.first_pose {
-        None => "trusted as given".to_string(),
-        Some(f) if f.kept => format!(
-            "refined against the CT first, {:.2} mm / {:.2} deg from the given pose",
-            f.correction_mm, f.correction_deg
-        ),
-        Some(f) if f.status == "converged" || f.status == "not_converged" => format!(
-            "used as given: refined against the CT it fitted the frame {:.0} % better",
-            100.0 * (1.0 - f.cost_refined / f.cost_given)
-        ),
-        Some(f) => format!(
-            "used as given: it could not be refined against the CT, {}",
-            f.status
-        ),
-    };
+    let first = t.first_pose_words();
     format!(
         "<p>Tracked from the first frame's pose alone ({first}): {} of {} frames accepted; \
          {lost}; {} fits of the light; {:.2} s per frame. The corrections below are from the \

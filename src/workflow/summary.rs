@@ -98,19 +98,8 @@ fn registration_line(reg: &PoseRegistration) -> String {
     let mid = mm.len() / 2;
     let tracked = reg.tracking.as_ref().map_or(String::new(), |t| {
         format!(
-            "  tracked from the first pose{}: {} of {} frames, {}, {:.2} s per frame\n",
-            match &t.first_pose {
-                Some(f) if f.kept => format!(
-                    " (refined {:.2} mm / {:.2} deg against the CT)",
-                    f.correction_mm, f.correction_deg
-                ),
-                Some(f) => format!(
-                    " (given: refined it fitted {:.0} % better, {})",
-                    100.0 * (1.0 - f.cost_refined / f.cost_given),
-                    f.status
-                ),
-                None => " (trusted as given)".to_string(),
-            },
+            "  tracked from the first pose ({}): {} of {} frames, {}, {:.2} s per frame\n",
+            t.first_pose_words(),
             t.frames_tracked,
             t.frames,
             match (t.first_lost, t.resumed_at.is_empty()) {
