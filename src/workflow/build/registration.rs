@@ -315,6 +315,23 @@ pub(super) struct RegistrationView {
 }
 
 impl RegistrationView {
+    /// The model the frames are registered against: the scene's mesh in `light`, with
+    /// `texture` (`None`: the geometry's shading alone), seen by the reduced frames' camera.
+    pub(super) fn model_parts<'a>(
+        &'a self,
+        scene: &'a BuildScene,
+        light: &'a CalibratedModel,
+        texture: Option<&'a MipTexture>,
+    ) -> ModelParts<'a> {
+        ModelParts {
+            scene: &scene.scene,
+            tri_uv: &scene.tri_uv,
+            texture,
+            light,
+            camera: &self.camera,
+        }
+    }
+
     fn new(scene: &BuildScene, quiet: bool) -> Result<RegistrationView> {
         let full = &scene.case.camera;
         let level = (scene.level..=4)
@@ -670,13 +687,7 @@ fn run_round(
     // A geometry round still needs the texture: the colour–albedo relation it divides
     // the frames by is fitted on it.
     let texture = consensus_texture(scene, light, opts)?;
-    let parts = ModelParts {
-        scene: &scene.scene,
-        tri_uv: &scene.tri_uv,
-        texture: Some(&texture),
-        light,
-        camera: &view.camera,
-    };
+    let parts = view.model_parts(scene, light, Some(&texture));
     let mask = view.mask.as_deref();
     let label = match kind {
         RoundKind::Geometry => "register (CT)",
@@ -906,13 +917,7 @@ fn overlays(
     registered: &[Affine],
     results: &[FramePoseResult],
 ) -> Result<Vec<PoseOverlay>> {
-    let parts = ModelParts {
-        scene: &scene.scene,
-        tri_uv: &scene.tri_uv,
-        texture: None,
-        light,
-        camera: &view.camera,
-    };
+    let parts = view.model_parts(scene, light, None);
     let chosen = choose_overlay_frames(results, 3);
     pose_overlays(
         parts,

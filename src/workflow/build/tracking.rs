@@ -17,8 +17,8 @@ use crate::math::Affine;
 use crate::model::registration::{FirstPoseRefinement, TrackingSummary};
 use crate::registration::pose::rotation_of;
 use crate::registration::{
-    apply_delta, delta_between, register_round, FrameStatus, ModelParts, RoundKind, RoundOptions,
-    TrackOptions, TrackState, Tracker, VideoOptions,
+    apply_delta, delta_between, register_round, FrameStatus, RoundKind, RoundOptions, TrackOptions,
+    TrackState, Tracker, VideoOptions,
 };
 use crate::render::MipTexture;
 use crate::shading::calibrated::CalibratedModel;
@@ -230,13 +230,7 @@ fn refine_first_pose(
     let given = scene.poses[0];
     let poses = scene.poses.clone();
     let (light, texture) = fit_model(scene, &poses, &[0], opts, warnings)?;
-    let parts = ModelParts {
-        scene: &scene.scene,
-        tri_uv: &scene.tri_uv,
-        texture: Some(&texture),
-        light: &light,
-        camera: &view.camera,
-    };
+    let parts = view.model_parts(scene, &light, Some(&texture));
     let geometry = TrackOptions {
         against_texture: false,
         ..opts.tracking.track.clone()
@@ -345,13 +339,7 @@ fn track_from(
         for (k, &i) in fit_on.iter().enumerate() {
             state.gains[i] = light.gains[k];
         }
-        let parts = ModelParts {
-            scene: &scene.scene,
-            tri_uv: &scene.tri_uv,
-            texture: Some(&texture),
-            light: &light,
-            camera: &view.camera,
-        };
+        let parts = view.model_parts(scene, &light, Some(&texture));
         let seen: Vec<_> = fit_on.iter().map(|&i| state.poses[i]).collect();
         let tracker = Tracker::new(parts, &seen, &t.track)?;
         let fitted_at = next;
@@ -410,13 +398,7 @@ fn correct_window(
     if window == 0 || frames_in.len() < 4 {
         return Ok(());
     }
-    let parts = ModelParts {
-        scene: &scene.scene,
-        tri_uv: &scene.tri_uv,
-        texture: Some(texture),
-        light,
-        camera: &view.camera,
-    };
+    let parts = view.model_parts(scene, light, Some(texture));
     let frames: Vec<_> = frames_in.iter().map(|&i| view.frames[i].clone()).collect();
     let gains: Vec<f64> = frames_in.iter().map(|&i| state.gains[i]).collect();
     let poses: Vec<_> = frames_in.iter().map(|&i| state.poses[i]).collect();
