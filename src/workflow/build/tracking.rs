@@ -145,8 +145,8 @@ pub(super) fn track_poses(
         false => None,
     };
     let mut state = TrackState::new(&scene.frame_numbers, scene.poses[0], 1.0);
-    if let Some((status, true)) = first_pose.as_ref().map(|r| (r.status, r.summary.kept)) {
-        state.status[0] = Some(status);
+    if let Some(kept) = first_pose.as_ref().filter(|r| r.summary.kept) {
+        state.status[0] = Some(kept.status);
     }
     let mut fits = 0;
     let mut resumed_at: Vec<usize> = Vec::new();
