@@ -21,6 +21,10 @@ def load_poses(path):
     return [np.array(f["camera_to_world"]).reshape(4, 4) for f in d["frames"]]
 
 
+def frame_names(path):
+    return [f.get("image") for f in json.load(open(path))["frames"]]
+
+
 def axis_errors(est, truth):
     rt = truth[:3, :3].T
     t = rt @ (est[:3, 3] - truth[:3, 3])
@@ -33,7 +37,13 @@ def main():
         sys.exit(__doc__)
     est, truth = load_poses(sys.argv[1]), load_poses(sys.argv[2])
     if len(est) != len(truth):
-        sys.exit(f"{sys.argv[1]}: {len(est)} poses, {sys.argv[2]}: {len(truth)}")
+        # A model's poses.json holds the frames the build used: match them by image.
+        names = frame_names(sys.argv[2])
+        at = {n: i for i, n in enumerate(names) if n is not None}
+        mine = frame_names(sys.argv[1])
+        if None in mine or any(n not in at for n in mine):
+            sys.exit(f"{sys.argv[1]}: {len(est)} poses, {sys.argv[2]}: {len(truth)}")
+        truth = [truth[at[n]] for n in mine]
     e = np.array([axis_errors(a, b) for a, b in zip(est, truth)])
     mm = np.linalg.norm(e[:, :3], axis=1)
     deg = np.linalg.norm(e[:, 3:], axis=1)

@@ -177,6 +177,38 @@ impl TrackState {
         }
     }
 
+    /// Whether frame `f` comes after a gap: a frame not accepted since the last accepted one,
+    /// or more than 2.5 times as long since it as between the last two accepted frames (a
+    /// dense track of a long video skips the frames judged too dark or blurred to use; frames
+    /// tracked evenly spaced are at most twice as far apart as the nearest two).
+    pub fn after_gap(&self, f: usize) -> bool {
+        let ok = self.accepted_before(f);
+        match ok.as_slice() {
+            [] => false,
+            [.., b] if *b + 1 < f => true,
+            [.., a, b] => {
+                let t = &self.times;
+                t[f] - t[*b] > 2.5 * (t[*b] - t[*a])
+            }
+            [_] => false,
+        }
+    }
+
+    /// The time from the last accepted frame before `f` to `f`, in the spacing of the last
+    /// two accepted frames, and at least the frames tried since: after frames not accepted,
+    /// or frames the selection left out (black ones), the scope had that much longer to move.
+    pub fn steps_since_accepted(&self, f: usize) -> f64 {
+        let ok = self.accepted_before(f);
+        let tried = ok.last().map_or(1, |&b| f - b) as f64;
+        match ok.as_slice() {
+            [.., a, b] => {
+                let t = &self.times;
+                ((t[f] - t[*b]) / (t[*b] - t[*a])).max(tried)
+            }
+            _ => tried,
+        }
+    }
+
     /// The last accepted pose before `f` moved along its view axis as far as the scope
     /// moved per frame between the last two accepted frames, times the frames since: across
     /// a gap a scope goes on down the airway while its turn is unknown.
@@ -351,7 +383,7 @@ impl<'a> Tracker<'a> {
         // from frame 9's, and was refused at one frame's 3 mm; the start that passed found
         // it one cartilage ring away (4 mm), and the rest of the video with it. Scaled: 0.1
         // mm, and the video on track (BENCHMARKS.md, session 32).
-        let steps = (f - last) as f64;
+        let steps = state.steps_since_accepted(f);
         let far = |from: &Affine, r: &FrameRegistration| {
             let jump = delta_between(from, &r.pose);
             jump.mm() > o.max_jump_mm * steps || jump.deg() > o.max_jump_deg * steps
@@ -376,7 +408,7 @@ impl<'a> Tracker<'a> {
             Ok(())
         };
         let mut best = self.reg.refine_frame(&obs, &predicted)?;
-        if steps > 1.0 && o.relocalise_deg > 0.0 {
+        if state.after_gap(f) && o.relocalise_deg > 0.0 {
             // After a gap the scope may have stopped, gone on, or turned: every start is
             // tried, and the one that fits the frame best is kept.
             let advanced = state.advanced(f);
@@ -526,12 +558,24 @@ mod tests {
             state.commit(f, &try_at(along(0.0), false, true), 3);
         }
         assert_eq!(state.first_lost, None, "blank frames are not refusals");
+        assert!(!state.after_gap(2) && state.after_gap(6));
         let d = delta_between(&along(12.0), &state.advanced(6));
         assert!(d.mm() < 1e-9 && d.deg() < 1e-9, "{d:?}");
         for f in 6..8 {
             state.commit(f, &try_at(along(0.0), false, false), 2);
         }
         assert_eq!(state.first_lost, Some(6));
+    }
+
+    #[test]
+    fn a_gap_in_time_between_tracked_frames_is_a_gap() {
+        // Frames numbered 0, 2, 4, 10: the video's frames 5-9 were not tracked.
+        let mut state = TrackState::new(&[0, 2, 4, 10], Affine::identity(), 1.0);
+        state.accepted[1] = true;
+        state.accepted[2] = true;
+        assert!(!state.after_gap(2));
+        assert!(state.after_gap(3));
+        assert_eq!(state.steps_since_accepted(3), 3.0);
     }
 
     #[test]

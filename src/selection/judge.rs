@@ -17,6 +17,11 @@ pub struct JudgeOptions {
     pub max_saturated_share: f64,
     /// More than this share of dark pixels is a bad exposure.
     pub max_dark_share: f64,
+    /// Less than this share of the image pixels neither saturated nor dark: the frame shows
+    /// nothing to register, fit or fuse (black, or white), and is never used, even within
+    /// the budget. Used, one black frame among 80 with a tracker's poses stopped the build
+    /// at its first fit of the light (BENCHMARKS.md, session 34).
+    pub min_exposed_share: f64,
 }
 
 impl Default for JudgeOptions {
@@ -26,6 +31,7 @@ impl Default for JudgeOptions {
             blurred_below: 0.75,
             max_saturated_share: 0.25,
             max_dark_share: 0.75,
+            min_exposed_share: 0.05,
         }
     }
 }
@@ -35,8 +41,11 @@ impl Default for JudgeOptions {
 pub enum Failure {
     /// Far less sharp than its neighbours (motion blur, defocus).
     Blurred,
-    /// Mostly saturated or dark, or no image pixel at all.
+    /// Mostly saturated or dark.
     BadlyExposed,
+    /// Next to nothing but saturated or dark pixels, or no image pixel at all
+    /// ([`JudgeOptions::min_exposed_share`]): reported as badly exposed, and never used.
+    Blank,
 }
 
 /// The verdict on one frame.
@@ -68,8 +77,9 @@ pub fn judge_frames(stats: &[FrameStats], opts: &JudgeOptions) -> Vec<Judgement>
                 1.0
             };
             let exposed = (1.0 - s.saturated_share - s.dark_share).max(0.0);
-            let failure = if s.image_share <= 0.0
-                || s.saturated_share > opts.max_saturated_share
+            let failure = if s.image_share <= 0.0 || exposed < opts.min_exposed_share {
+                Some(Failure::Blank)
+            } else if s.saturated_share > opts.max_saturated_share
                 || s.dark_share > opts.max_dark_share
             {
                 Some(Failure::BadlyExposed)
@@ -117,6 +127,8 @@ mod tests {
         let mut s: Vec<FrameStats> = (0..40).map(|i| stats(1.0 + 0.05 * i as f64)).collect();
         s[30].sharpness /= 3.0;
         s[5].saturated_share = 0.5;
+        // Black but for 3 % of its pixels: the lens against the wall.
+        s[39].dark_share = 0.97;
         let j = judge_frames(&s, &JudgeOptions::default());
         let failed: Vec<(usize, Failure)> = j
             .iter()
@@ -125,7 +137,11 @@ mod tests {
             .collect();
         assert_eq!(
             failed,
-            vec![(5, Failure::BadlyExposed), (30, Failure::Blurred)]
+            vec![
+                (5, Failure::BadlyExposed),
+                (30, Failure::Blurred),
+                (39, Failure::Blank)
+            ]
         );
         // Frame 30's reference: the upper median of frames 23..=37 but itself, frame 31's 2.55.
         assert!((j[30].relative_sharpness - (2.5 / 3.0) / 2.55).abs() < 1e-12);

@@ -93,7 +93,7 @@ impl Reason {
     pub fn of_failure(f: Failure) -> Reason {
         match f {
             Failure::Blurred => Reason::Blurred,
-            Failure::BadlyExposed => Reason::BadlyExposed,
+            Failure::BadlyExposed | Failure::Blank => Reason::BadlyExposed,
         }
     }
 
@@ -154,7 +154,17 @@ pub fn choose_frames(
         gain,
     };
     if !needs_coverage(judged, budget) || coverage.len() != n {
-        return vec![chosen(0.0); n];
+        // Within the budget every frame is used but those that show nothing.
+        return judged
+            .iter()
+            .map(|j| match j.failure {
+                Some(Failure::Blank) => Decision {
+                    reason: Reason::BadlyExposed,
+                    gain: 0.0,
+                },
+                _ => chosen(0.0),
+            })
+            .collect();
     }
     // From here on there are more frames than the budget.
     let weights: Vec<f64> = judged.iter().map(|j| j.score).collect();
@@ -265,6 +275,29 @@ mod tests {
             quality: vec![1.0; cells.len()],
             cells: cells.collect(),
         }
+    }
+
+    #[test]
+    fn within_the_budget_every_frame_is_used_but_the_blank() {
+        let j = vec![
+            judged(1.0, None),
+            judged(0.3, Some(Failure::Blurred)),
+            judged(0.0, Some(Failure::Blank)),
+            judged(0.5, Some(Failure::BadlyExposed)),
+        ];
+        let reasons: Vec<Reason> = choose_frames(&j, &[], 10, &SelectionOptions::default())
+            .iter()
+            .map(|d| d.reason)
+            .collect();
+        assert_eq!(
+            reasons,
+            [
+                Reason::Chosen,
+                Reason::Chosen,
+                Reason::BadlyExposed,
+                Reason::Chosen
+            ]
+        );
     }
 
     #[test]
