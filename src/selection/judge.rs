@@ -19,7 +19,7 @@ pub struct JudgeOptions {
     pub max_dark_share: f64,
     /// Less than this share of the image pixels neither saturated nor dark: the frame shows
     /// nothing to register, fit or fuse (black, or white), and is never used, even within
-    /// the budget. Used, one black frame among 80 with a tracker's poses stopped the build
+    /// the budget. Used, three black frames among 80 with a tracker's poses stopped the build
     /// at its first fit of the light (BENCHMARKS.md, session 34).
     pub min_exposed_share: f64,
 }
