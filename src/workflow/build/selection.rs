@@ -73,7 +73,12 @@ pub fn select_frames(
     let t_cast = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let decisions = choose_frames(&judged, &coverage, grid.cells(), sel);
+    let mut decisions = choose_frames(&judged, &coverage, grid.cells(), sel);
+    if opts.poses == PosesMode::First && !decisions.is_empty() {
+        // Without a tracker the first frame's pose is the only one given: tracking starts
+        // from that frame, whatever it shows (a blank one fails there, naming it).
+        decisions[0].reason = Reason::Chosen;
+    }
     let keep = chosen(&decisions);
     if keep.is_empty() {
         warnings.push(
