@@ -63,11 +63,11 @@ pub struct TrackOptions {
     /// flagged without a registration and does not count towards the loss. Counted, three
     /// black frames lost the track wherever they fell (BENCHMARKS.md, session 32).
     pub blank_below: f64,
-    /// The frame after frames not accepted is tried from the prediction, the last accepted
-    /// pose, and that pose moved on along its view axis at the last speed ([`TrackState::advanced`]);
-    /// when none of them leads to an accepted pose, from all three turned this far (degrees)
-    /// either way about their camera's x and y axes (0: from the first two alone, while
-    /// neither is accepted). Across a gap the constant-velocity rotation runs away (the demo's
+    /// The frame after a gap ([`TrackState::after_gap`]) is tried from the prediction, the
+    /// last accepted pose, and that pose moved on along its view axis at the last speed
+    /// ([`TrackState::advanced`]); when none of them leads to an accepted pose, from all three
+    /// turned this far (degrees) either way about their camera's x and y axes (0: as any
+    /// other frame, from the last accepted pose only when the prediction is not accepted). Across a gap the constant-velocity rotation runs away (the demo's
     /// view 7, 14 and 28 deg off one, two and three frames into one); the scope's advance
     /// does not. A blackout of 2-5 frames at frame 30 of the demo's video lost the track
     /// without; with, the frames after it ended within 1 mm (BENCHMARKS.md, session 34).
