@@ -59,6 +59,16 @@ impl ExclusionCounts {
     pub fn total(&self) -> usize {
         self.no_hit + self.grazing + self.saturated + self.dark
     }
+
+    /// What most likely left a frame without usable pixels, in words: the frame itself when
+    /// it is mostly dark or saturated (a black frame with a tracker's pose is not a wrong
+    /// pose), else its pose.
+    pub fn likely_cause(&self) -> &'static str {
+        match self.dark + self.saturated > self.no_hit + self.grazing {
+            true => "the frame shows next to nothing (dark or saturated): remove it from the case (its file and its entry in poses.json), or let `build`'s frame selection (--max-frames above 0) leave it out",
+            false => "is the pose registered to the CT?",
+        }
+    }
 }
 
 impl std::fmt::Display for ExclusionCounts {
@@ -177,6 +187,24 @@ fn percentile(values: &mut [f32], p: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_dark_frame_is_blamed_on_itself_and_a_frame_off_the_mesh_on_its_pose() {
+        let black = ExclusionCounts {
+            grazing: 19,
+            dark: 102_381,
+            ..Default::default()
+        };
+        assert!(black
+            .likely_cause()
+            .starts_with("the frame shows next to nothing"));
+        let off = ExclusionCounts {
+            no_hit: 90_000,
+            dark: 10_000,
+            ..Default::default()
+        };
+        assert_eq!(off.likely_cause(), "is the pose registered to the CT?");
+    }
 
     #[test]
     fn each_exclusion_reason_is_counted_once() {

@@ -6,7 +6,7 @@ use crate::shading::ExclusionCounts;
 #[derive(Debug, thiserror::Error)]
 pub enum BuildError {
     /// A frame in which too few pixels see the airway as the shading model expects.
-    #[error("frame {frame} ({name}): too few pixels obey the shading model ({samples} samples; excluded: {excluded}): is the pose registered to the CT?")]
+    #[error("frame {frame} ({name}): too few pixels obey the shading model ({samples} samples; excluded: {excluded}): {}", .excluded.likely_cause())]
     FrameUnusable {
         /// Frame index (poses order).
         frame: usize,
