@@ -19,11 +19,11 @@ use super::chroma::ChromaAlbedo;
 use super::frame::RegistrationOptions;
 use super::frame::{FrameObs, FrameRegistrar, FrameRegistration, FrameStatus};
 use super::photometric::{ModelParts, RayGrid};
-use super::pose::{apply_delta, delta_between, extrapolate, rotation_of, PoseDelta};
+use super::pose::{delta_between, extrapolate, perturb};
 use super::rounds::levels_below_reference;
 use crate::camera::pose::camera_centre;
 use crate::image::Frame;
-use crate::math::{Affine, Vector3};
+use crate::math::Affine;
 use crate::Result;
 
 /// Options of [`Tracker`].
@@ -223,14 +223,8 @@ impl TrackState {
             camera_centre(&self.poses[*b]),
         );
         let speed = (cb - ca).norm() / (t[*b] - t[*a]);
-        let ahead = rotation_of(&self.poses[*b]) * Vector3::z() * speed * (t[f] - t[*b]);
-        apply_delta(
-            &self.poses[*b],
-            &PoseDelta {
-                translation_mm: ahead,
-                rotation: Vector3::zeros(),
-            },
-        )
+        let ahead = speed * (t[f] - t[*b]);
+        perturb(&self.poses[*b], &[0.0, 0.0, ahead, 0.0, 0.0, 0.0])
     }
 
     fn median_cost(&self, f: usize, window: usize) -> Option<f64> {
@@ -471,22 +465,13 @@ fn usable_share(
 /// Each of `poses` turned by `deg` either way about its camera's x and y axes.
 fn turned_starts(poses: &[Affine], deg: f64) -> Vec<Affine> {
     let a = deg.to_radians();
-    let turns = [
-        Vector3::new(a, 0.0, 0.0),
-        Vector3::new(-a, 0.0, 0.0),
-        Vector3::new(0.0, a, 0.0),
-        Vector3::new(0.0, -a, 0.0),
-    ];
+    let turns = [[a, 0.0], [-a, 0.0], [0.0, a], [0.0, -a]];
     poses
         .iter()
         .flat_map(|p| {
-            turns.iter().map(move |w| {
-                let delta = PoseDelta {
-                    translation_mm: Vector3::zeros(),
-                    rotation: rotation_of(p) * w,
-                };
-                apply_delta(p, &delta)
-            })
+            turns
+                .iter()
+                .map(move |[x, y]| perturb(p, &[0.0, 0.0, 0.0, *x, *y, 0.0]))
         })
         .collect()
 }
