@@ -53,6 +53,13 @@ pub struct RegistrationOptions {
     pub noise_floor: f32,
     /// A frame's channel at or above this is saturated; such pixels are not used.
     pub saturation_level: f32,
+    /// A frame with fewer than this share of its pixels (inside the mask) neither under the
+    /// noise floor nor saturated shows nothing to register (the lens against the wall, fluid
+    /// over it, the light off): [`RegistrationOptions::shows_nothing`]. Such frames are
+    /// flagged [`FrameStatus::Blank`] without a registration. Tried, three black frames lost
+    /// a track wherever they fell (BENCHMARKS.md, session 32), and one stopped a build from a
+    /// tracker's poses at the light's first fit (session 34).
+    pub blank_below: f64,
     /// Surface points seen more obliquely than this (cos of the angle) are not used.
     pub min_gamma: f32,
     /// Weight of the model's image gradient in the Jacobian at levels against the texture
@@ -93,6 +100,7 @@ impl Default for RegistrationOptions {
             relative_sigma: 0.05,
             noise_floor: 0.004,
             saturation_level: 0.999,
+            blank_below: 0.05,
             min_gamma: 0.1,
             // Against the texture, the frame's own gradient: the exact Jacobian of the
             // residual the steps between renders minimise. With the model's, texture rounds
@@ -111,6 +119,25 @@ impl Default for RegistrationOptions {
             min_radius: 1.0 / 32.0,
             shrink_to_failed_step: false,
         }
+    }
+}
+
+impl RegistrationOptions {
+    /// Whether `frame` shows nothing to register: under [`RegistrationOptions::blank_below`]
+    /// of its pixels (inside `mask`) have a brightest channel at or above the noise floor and
+    /// none saturated.
+    pub fn shows_nothing(&self, frame: &Frame, mask: Option<&[bool]>) -> bool {
+        let (mut inside, mut usable) = (0usize, 0usize);
+        for (i, px) in frame.rgb.chunks_exact(3).enumerate() {
+            if mask.is_some_and(|m| !m[i]) {
+                continue;
+            }
+            inside += 1;
+            let brightest = px.iter().fold(0.0f32, |a, &v| a.max(v));
+            usable +=
+                usize::from(brightest >= self.noise_floor && brightest < self.saturation_level);
+        }
+        (usable as f64) < self.blank_below * inside.max(1) as f64
     }
 }
 
@@ -144,6 +171,9 @@ pub enum FrameStatus {
     /// The correction departs from its neighbours' far more than a tracker's error can
     /// (see [`super::video`]): the given pose was wrong.
     Outlier,
+    /// The frame shows next to nothing, dark or saturated
+    /// ([`RegistrationOptions::shows_nothing`]): not registered, and left out.
+    Blank,
 }
 
 impl FrameStatus {
@@ -156,6 +186,7 @@ impl FrameStatus {
             FrameStatus::OutsideLumen => "outside_lumen",
             FrameStatus::HighCost => "high_cost",
             FrameStatus::Outlier => "outlier",
+            FrameStatus::Blank => "blank",
         }
     }
 }

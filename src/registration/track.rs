@@ -58,11 +58,6 @@ pub struct TrackOptions {
     /// geometry's shading (red channel): the lumen's dark centre pins the view direction,
     /// which a texture fused from the tracked frames follows when they drift.
     pub geometry_from_level: usize,
-    /// A frame with fewer than this share of its pixels (inside the mask) neither dark nor
-    /// saturated shows nothing to register (the lens against the wall, fluid over it): it is
-    /// flagged without a registration and does not count towards the loss. Counted, three
-    /// black frames lost the track wherever they fell (BENCHMARKS.md, session 32).
-    pub blank_below: f64,
     /// The frame after a gap ([`TrackState::after_gap`]) is tried from the prediction, the
     /// last accepted pose, and that pose moved on along its view axis at the last speed
     /// ([`TrackState::advanced`]); when none of them leads to an accepted pose, from all three
@@ -86,7 +81,6 @@ impl Default for TrackOptions {
             lost_after: 3,
             against_texture: true,
             geometry_from_level: 2,
-            blank_below: 0.05,
             relocalise_deg: 10.0,
         }
     }
@@ -347,11 +341,10 @@ impl<'a> Tracker<'a> {
         let gain = state.gains[last];
         let predicted = state.predict(f);
         let ro = &self.reg.opts;
-        if usable_share(&frames[f], mask, ro.noise_floor, ro.saturation_level) < o.blank_below {
+        if ro.shows_nothing(&frames[f], mask) {
             return Ok(FrameTry {
                 accepted: false,
-                blank: true,
-                status: FrameStatus::TooFewPoints,
+                status: FrameStatus::Blank,
                 pose: predicted,
                 gain,
                 cost: f64::NAN,
@@ -429,7 +422,6 @@ impl<'a> Tracker<'a> {
         };
         Ok(FrameTry {
             accepted,
-            blank: false,
             status,
             pose: if accepted { best.pose } else { predicted },
             gain: if accepted {
@@ -440,26 +432,6 @@ impl<'a> Tracker<'a> {
             cost: best.cost_after,
         })
     }
-}
-
-/// The share of `frame`'s pixels (inside `mask`) whose brightest channel reaches
-/// `noise_floor` and none `saturation_level`: those the registration can compare.
-fn usable_share(
-    frame: &Frame,
-    mask: Option<&[bool]>,
-    noise_floor: f32,
-    saturation_level: f32,
-) -> f64 {
-    let (mut inside, mut usable) = (0usize, 0usize);
-    for (i, px) in frame.rgb.chunks_exact(3).enumerate() {
-        if mask.is_some_and(|m| !m[i]) {
-            continue;
-        }
-        inside += 1;
-        let brightest = px.iter().fold(0.0f32, |a, &v| a.max(v));
-        usable += usize::from(brightest >= noise_floor && brightest < saturation_level);
-    }
-    usable as f64 / inside.max(1) as f64
 }
 
 /// Each of `poses` turned by `deg` either way about its camera's x and y axes.
@@ -481,9 +453,6 @@ fn turned_starts(poses: &[Affine], deg: f64) -> Vec<Affine> {
 pub struct FrameTry {
     /// Accepted (see the module docs).
     pub accepted: bool,
-    /// The frame shows nothing to register ([`TrackOptions::blank_below`]): flagged, not
-    /// registered, and not counted towards the loss.
-    pub blank: bool,
     /// How it ended (`HighCost` or `Outlier` when it converged but was not accepted).
     pub status: FrameStatus,
     /// The refined pose when accepted, else the prediction.
@@ -504,7 +473,7 @@ impl TrackState {
         self.status[f] = Some(t.status);
         if t.accepted {
             self.flagged_in_row = 0;
-        } else if !t.blank {
+        } else if t.status != FrameStatus::Blank {
             self.flagged_in_row += 1;
             if self.flagged_in_row >= lost_after && self.first_lost.is_none() {
                 self.first_lost = Some(f + 1 - lost_after);
@@ -532,8 +501,10 @@ mod tests {
         let mut state = TrackState::new(&numbers, along(0.0), 1.0);
         let try_at = |pose, accepted, blank| FrameTry {
             accepted,
-            blank,
-            status: FrameStatus::Converged,
+            status: match blank {
+                true => FrameStatus::Blank,
+                false => FrameStatus::Converged,
+            },
             pose,
             gain: 1.0,
             cost: 1.0,
