@@ -490,6 +490,78 @@ fn register_command_writes_poses_and_a_report_and_refuses_bad_input() {
 }
 
 #[test]
+fn a_black_frame_is_left_out_by_register_and_by_a_build_without_a_selection() {
+    // A tracker's poses, and frame 5 black (the lens against the wall). `register` runs no
+    // frame selection, nor does `build --max-frames 0`: both stopped at the light's first fit
+    // ("too few pixels obey the shading model") before the registration flagged such frames.
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let opts = PhantomOptions {
+        frames: 12,
+        width: 128,
+        height: 128,
+        pose_noise: PoseNoise::new(1.0, 1.0),
+        ..Default::default()
+    };
+    let case_dir = dir.join("case");
+    write_phantom_case(&case_dir, &opts).unwrap();
+    let black = case_dir.join("frames/000005.png");
+    bronchosim::io::png::write_png_srgb8(&black, &Frame::new(128, 128)).unwrap();
+    let build_opts = BuildOptions {
+        cross_validate_every: 0,
+        shading: Some(ShadingKind::Calibrated),
+        registration_rounds: 1,
+        quiet: true,
+        ..Default::default()
+    };
+
+    let s = register_command(&case_dir, &dir.join("reg"), &build_opts).unwrap();
+    let frames = &s.registration.frames;
+    let statuses: Vec<&str> = frames.iter().map(|f| f.status.as_str()).collect();
+    println!("register: {statuses:?}; {:?}", s.warnings);
+    assert_eq!(
+        (frames[5].status.as_str(), frames[5].used),
+        ("blank", false)
+    );
+    assert_eq!(frames.iter().filter(|f| f.used).count(), 11, "{frames:?}");
+    assert_eq!(s.registration.left_out, 1);
+    assert!(
+        s.warnings
+            .iter()
+            .any(|w| w.contains("show next to nothing")),
+        "{:?}",
+        s.warnings
+    );
+    // poses.json keeps one entry per frame of the video, the black one at its given pose.
+    let poses = read_poses(&dir.join("reg/poses.json"), &case_dir).unwrap();
+    assert_eq!(poses.len(), 12);
+    let given = Case::open(&case_dir).unwrap().poses;
+    let (mm, deg) = pose_error(
+        &poses[5].pose.camera_to_world,
+        &given[5].pose.camera_to_world,
+    );
+    assert!(mm < 1e-6 && deg < 1e-6, "{mm} mm {deg} deg");
+
+    let no_selection = BuildOptions {
+        selection: bronchosim::selection::SelectionOptions {
+            max_frames: 0,
+            ..Default::default()
+        },
+        ..build_opts
+    };
+    let m = build_model(&case_dir, &dir.join("model"), &no_selection).unwrap();
+    let reg = m.registration.as_ref().unwrap();
+    assert!(m.frame_selection.is_none());
+    assert_eq!((reg.frames[5].status.as_str(), reg.left_out), ("blank", 1));
+    assert_eq!(
+        m.fit_quality.len(),
+        11,
+        "the model is built from the other frames"
+    );
+    assert!(m.fit_quality.iter().all(|f| f.frame != 5));
+}
+
+#[test]
 fn build_repeats_a_geometry_round_that_leaves_many_outliers() {
     // Tracker poses 3 mm / 4 degrees off: the first geometry round leaves many frames outliers,
     // and a texture fused after it follows their errors.

@@ -61,6 +61,7 @@ use crate::shading::{FittedShading, ShadingKind};
 use crate::workflow::progress::Progress;
 use crate::workflow::registration_overlays::{choose_overlay_frames, pose_overlays};
 use crate::Result;
+use rayon::prelude::*;
 use std::time::Instant;
 
 /// A frame whose registration is not to be trusted.
@@ -109,7 +110,7 @@ pub fn register_poses(
         }
         (statuses, Some(summary), Some(light))
     } else {
-        (Vec::new(), None, None)
+        (blank_statuses(&view), None, None)
     };
     let given = scene.poses.clone();
     let tracked = statuses.clone();
@@ -166,13 +167,15 @@ pub fn register_poses(
         .enumerate()
         .map(|(i, (status, is_flagged))| {
             let d = delta_between(&given[i], &scene.poses[i]);
+            let blank = status == FrameStatus::Blank.name();
             FramePoseResult {
                 frame: scene.frame_numbers[i],
                 correction_mm: d.mm(),
                 correction_deg: d.deg(),
                 status,
-                // Kept given poses are all used, but not a frame the tracker lost.
-                used: !is_flagged || (kept_given && !first),
+                // Kept given poses are all used, but not a frame the tracker lost nor one
+                // that shows nothing.
+                used: !is_flagged || (kept_given && !first && !blank),
             }
         })
         .collect();
@@ -204,8 +207,19 @@ pub fn register_poses(
         .into());
     }
     if left_out > 0 {
+        let blank = results
+            .iter()
+            .filter(|r| r.status == FrameStatus::Blank.name())
+            .count();
+        let why = match (blank, left_out - blank) {
+            (0, _) => "whose pose could not be trusted".to_string(),
+            (b, 0) => format!("that show next to nothing (dark or saturated; {b})"),
+            (b, u) => format!(
+                "that show next to nothing (dark or saturated; {b}) or whose pose could not be trusted ({u})"
+            ),
+        };
         warnings.push(format!(
-            "registration left out {left_out} of {} frames whose pose could not be trusted (model.json registration.frames says which and why)",
+            "registration left out {left_out} of {} frames {why} (registration.frames in model.json, or in register's registration.json, says which and why)",
             results.len()
         ));
         scene.keep_frames(&keep, opts.depth_cache_bytes);
@@ -936,6 +950,31 @@ fn overlays(
 /// frames) the track was lost at frame 14 and 14 frames after it were accepted 65-118 mm and
 /// 34-68 deg off; the rounds over them and the 14 good ones were not kept, and they went
 /// into the texture.
+/// With a tracker's poses, every frame's status before the rounds: `blank` (flagged) for a
+/// frame that shows nothing ([`RegistrationOptions::shows_nothing`]), `given` for the others;
+/// none when no frame is blank. A build's frame selection leaves such frames out before this;
+/// `register` and `build --max-frames 0` run none, and one black frame used to stop them at
+/// the light's first fit.
+fn blank_statuses(view: &RegistrationView) -> Vec<(String, bool)> {
+    let opts = RegistrationOptions::default();
+    let mask = view.mask.as_deref();
+    let blank: Vec<bool> = view
+        .frames
+        .par_iter()
+        .map(|f| opts.shows_nothing(f, mask))
+        .collect();
+    if !blank.contains(&true) {
+        return Vec::new();
+    }
+    blank
+        .into_iter()
+        .map(|b| match b {
+            true => (FrameStatus::Blank.name().to_string(), true),
+            false => ("given".to_string(), false),
+        })
+        .collect()
+}
+
 fn tracked_statuses(state: &TrackState) -> Vec<(String, bool)> {
     let lost = state.first_lost.unwrap_or(usize::MAX);
     state
