@@ -168,8 +168,7 @@ pub fn choose_frames(
     }
     // From here on there are more frames than the budget.
     let weights: Vec<f64> = judged.iter().map(|j| j.score).collect();
-    let (healthy, failed): (Vec<usize>, Vec<usize>) =
-        (0..n).partition(|&i| judged[i].failure.is_none());
+    let (healthy, failed) = healthy_and_failed(judged);
     let mean_value = healthy
         .iter()
         .map(|&i| weights[i] * coverage[i].total())
@@ -212,16 +211,30 @@ pub fn choose_frames(
         GainOver::UnseenCells,
         &mut state,
     );
-    for &i in &failed {
-        decisions[i] = Decision {
-            reason: failure_reason(judged[i].failure, Reason::BadlyExposed),
-            gain: gains[i],
-        };
+    for i in 0..n {
+        if judged[i].failure.is_some() {
+            decisions[i] = Decision {
+                reason: failure_reason(judged[i].failure, Reason::BadlyExposed),
+                gain: gains[i],
+            };
+        }
     }
     for &i in &picked {
         decisions[i] = chosen(gains[i]);
     }
     decisions
+}
+
+/// The frames judged healthy, and those judged blurred or badly exposed (a blank frame is
+/// neither: it is never used, not even for wall no other frame sees).
+fn healthy_and_failed(judged: &[Judgement]) -> (Vec<usize>, Vec<usize>) {
+    let healthy = (0..judged.len())
+        .filter(|&i| judged[i].failure.is_none())
+        .collect();
+    let failed = (0..judged.len())
+        .filter(|&i| matches!(judged[i].failure, Some(f) if f != Failure::Blank))
+        .collect();
+    (healthy, failed)
 }
 
 /// The reason of a frame judged `failure`, `healthy` when it was not.
@@ -340,6 +353,16 @@ mod tests {
         // Within the budget the whole video is used.
         let d = choose_frames(&j, &c, 80, &with(6));
         assert!(d.iter().all(|d| d.reason == Chosen));
+        // A blank frame is not used even for wall no other frame sees (what its pose casts
+        // is not what it shows), over the budget or within it.
+        let mut jb = j.clone();
+        jb.push(judged(0.04, Some(Failure::Blank)));
+        let mut cb = c.clone();
+        cb.push(cov(70..80));
+        for budget in [6, 7] {
+            let d = choose_frames(&jb, &cb, 80, &with(budget));
+            assert_eq!(d[6].reason, BadlyExposed, "budget {budget}");
+        }
         // Budget 3: frames 0, 2, 1 (gains 12, 12, 8); frame 3 would add 8 x 0.9: over budget;
         // frame 5 has no budget left.
         let d = choose_frames(
