@@ -11,6 +11,7 @@
 pub mod accuracy;
 pub mod align;
 pub mod blocks;
+pub mod blur;
 pub mod chroma;
 pub mod consensus;
 pub mod frame;
