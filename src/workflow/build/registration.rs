@@ -47,6 +47,8 @@ use crate::io::poses::PoseEntry;
 use crate::math::Affine;
 use crate::model::registration::{FramePoseResult, PoseOverlay, PoseRegistration, RoundSummary};
 use crate::model::selection::FrameSelection;
+use crate::registration::blur::sharpness_against;
+use crate::registration::photometric::{PhotometricModel, RayGrid};
 use crate::registration::{
     blocks::BlockOptions, consensus::consensus_poses, delta_between, interpolate_flagged,
     register_round, FrameRegistration, FrameStatus, ModelParts, RegistrationOptions, RoundKind,
@@ -125,7 +127,8 @@ pub fn register_poses(
     let rounds_on: Vec<usize> = (0..scene.frame_count())
         .filter(|&i| statuses.get(i).is_none_or(|s| !s.1))
         .collect();
-    let (run, refined_score) = rounds_on_frames(
+    let warnings_before = warnings.len();
+    let (mut run, mut refined_score) = rounds_on_frames(
         scene,
         &view,
         &rounds_on,
@@ -135,6 +138,57 @@ pub fn register_poses(
         &mut statuses,
         &mut last_light,
     )?;
+    let blurred = match &last_light {
+        Some(light) if rounds_to_run > 0 => {
+            let sharp_so_far: Vec<usize> = rounds_on
+                .iter()
+                .copied()
+                .filter(|&i| statuses.get(i).is_none_or(|s| !s.1))
+                .collect();
+            blurred_among(scene, &view, &sharp_so_far, light, opts)?
+        }
+        _ => Vec::new(),
+    };
+    if !blurred.is_empty() {
+        // Fused into the registration's texture, blurred frames smear it for every frame: the
+        // rounds run again without them, from the poses they started from (demo phantom, a
+        // fifth of the frames blurred, a tracker's 1.5 mm / 2 deg: 0.125 mm / 0.550 deg with
+        // them, 0.105 mm / 0.258 deg without; BENCHMARKS.md, session 35).
+        warnings.truncate(warnings_before);
+        warnings.push(format!(
+            "registration: {} of {} frames are far less sharp than the model predicts them from their poses (motion blur or defocus): the rounds were run again without them, and they are left out of the model",
+            blurred.len(),
+            rounds_on.len()
+        ));
+        // A blurred frame keeps the pose the first rounds refined (written, not used).
+        let mut start = given.clone();
+        for &i in &blurred {
+            start[i] = scene.poses[i];
+        }
+        set_poses(scene, start, opts);
+        statuses = match tracked.is_empty() {
+            true => vec![("given".to_string(), false); scene.frame_count()],
+            false => tracked.clone(),
+        };
+        for &i in &blurred {
+            statuses[i] = (BLURRED.to_string(), true);
+        }
+        let sharp: Vec<usize> = rounds_on
+            .iter()
+            .copied()
+            .filter(|i| !blurred.contains(i))
+            .collect();
+        (run, refined_score) = rounds_on_frames(
+            scene,
+            &view,
+            &sharp,
+            rounds_to_run,
+            opts,
+            warnings,
+            &mut statuses,
+            &mut last_light,
+        )?;
+    }
     let RoundsRun {
         rounds,
         given_score,
@@ -155,6 +209,9 @@ pub fn register_poses(
     if kept_given && first {
         // The tracked poses are kept: so are the tracker's verdicts on them.
         statuses = tracked;
+        for &i in &blurred {
+            statuses[i] = (BLURRED.to_string(), true);
+        }
     }
     if first {
         // A flagged frame between two kept ones is placed between them, not left at the
@@ -167,7 +224,9 @@ pub fn register_poses(
         .enumerate()
         .map(|(i, (status, is_flagged))| {
             let d = delta_between(&given[i], &scene.poses[i]);
-            let blank = status == FrameStatus::Blank.name();
+            // Neither a frame that shows nothing nor a blurred one is used, whatever poses
+            // are kept.
+            let unusable = status == FrameStatus::Blank.name() || status == BLURRED;
             FramePoseResult {
                 frame: scene.frame_numbers[i],
                 correction_mm: d.mm(),
@@ -175,7 +234,7 @@ pub fn register_poses(
                 status,
                 // Kept given poses are all used, but not a frame the tracker lost nor one
                 // that shows nothing.
-                used: !is_flagged || (kept_given && !first && !blank),
+                used: !is_flagged || (kept_given && !first && !unusable),
             }
         })
         .collect();
@@ -944,12 +1003,99 @@ fn overlays(
     )
 }
 
-/// Each frame's status after tracking (`given` for the first) and whether it is flagged.
-/// Frames from where the track was lost on are flagged (`track_lost`) even when the tracker
-/// accepted them: they were tracked from poses extrapolated past the loss. On ATM_307 (80
-/// frames) the track was lost at frame 14 and 14 frames after it were accepted 65-118 mm and
-/// 34-68 deg off; the rounds over them and the 14 good ones were not kept, and they went
-/// into the texture.
+/// A frame's status when it is far less sharp than the model predicts it ([`blurred_frames`]).
+const BLURRED: &str = "blurred";
+
+/// Fewest frames whose median sharpness against the model is a reference for blur.
+const MIN_FRAMES_FOR_BLUR: usize = 8;
+
+/// Share of the video's median sharpness against the model's prediction
+/// ([`crate::registration::blur::sharpness_against`]) under which a frame is blurred. On the
+/// demo phantom with a fifth of its frames motion-blurred (`phantom --motion-blur-share 0.2`)
+/// blurred frames scored 0.26-0.67 of the median and sharp ones 0.79 and up; a real airway
+/// tree's sharp frames (ATM_307) 0.92 and up (BENCHMARKS.md, session 35).
+const BLURRED_BELOW: f64 = 0.7;
+
+/// Among the frames `on` of `scene` (increasing indices), those far less sharp than the
+/// model predicts them ([`blurred_frames`]); none with fewer than [`MIN_FRAMES_FOR_BLUR`].
+fn blurred_among(
+    scene: &mut BuildScene,
+    view: &RegistrationView,
+    on: &[usize],
+    light: &CalibratedModel,
+    opts: &BuildOptions,
+) -> Result<Vec<usize>> {
+    if on.len() < MIN_FRAMES_FOR_BLUR {
+        return Ok(Vec::new());
+    }
+    let on_view = view.subset(on);
+    let blurred = scene.on_frames(on, opts.depth_cache_bytes, |scene| {
+        blurred_frames(scene, &on_view, light, opts)
+    })?;
+    Ok(blurred.into_iter().map(|k| on[k]).collect())
+}
+
+/// The frames of `scene` (indices) far less sharp than the model predicts them from their
+/// poses: the light `light` and a texture fused from the frames at those poses, rendered
+/// where the view's frames are compared (`view`, reduced), on the pixels neither dark nor
+/// saturated, away from the prediction's edges.
+fn blurred_frames(
+    scene: &BuildScene,
+    view: &RegistrationView,
+    light: &CalibratedModel,
+    opts: &BuildOptions,
+) -> Result<Vec<usize>> {
+    let texture = consensus_texture(scene, light, opts)?;
+    let model = PhotometricModel::new(view.model_parts(scene, light, Some(&texture)))?;
+    let grid = RayGrid::new(&view.camera, 0, 1);
+    let ro = RegistrationOptions::default();
+    let (w, h) = (view.camera.width as usize, view.camera.height as usize);
+    let progress = Progress::new("sharpness", scene.frame_count() as u64, opts.quiet);
+    let ratios: Vec<Option<f64>> = (0..scene.frame_count())
+        .into_par_iter()
+        .map(|i| {
+            let seen = model.view(&grid, &scene.poses[i], ro.min_gamma);
+            let mut predicted = Frame::new(w as u32, h as u32);
+            let mut use_px = vec![false; w * h];
+            for p in &seen.points {
+                let k = p.ray as usize;
+                for c in 0..3 {
+                    predicted.rgb[3 * k + c] = (p.radiance[c] + seen.offset[c]) as f32;
+                }
+                use_px[k] = true;
+            }
+            let frame = &view.frames[i];
+            for (k, ok) in use_px.iter_mut().enumerate() {
+                let px = &frame.rgb[3 * k..3 * k + 3];
+                let brightest = px.iter().fold(0.0f32, |a, &v| a.max(v));
+                *ok &= brightest >= ro.noise_floor
+                    && brightest < ro.saturation_level
+                    && view.mask.as_ref().is_none_or(|m| m[k]);
+            }
+            let use_px = erode(&erode(&use_px, w, h), w, h);
+            progress.inc();
+            sharpness_against(frame, &predicted, &use_px, w * h / 20)
+        })
+        .collect();
+    progress.finish();
+    let median = median(ratios.iter().flatten().copied().collect());
+    Ok((0..ratios.len())
+        .filter(|&i| ratios[i].is_some_and(|r| r < BLURRED_BELOW * median))
+        .collect())
+}
+
+/// `keep` without the pixels next to one it does not keep (3x3).
+fn erode(keep: &[bool], w: usize, h: usize) -> Vec<bool> {
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            keep[i]
+                && (y.saturating_sub(1)..(y + 2).min(h))
+                    .all(|yy| (x.saturating_sub(1)..(x + 2).min(w)).all(|xx| keep[yy * w + xx]))
+        })
+        .collect()
+}
+
 /// With a tracker's poses, every frame's status before the rounds: `blank` (flagged) for a
 /// frame that shows nothing ([`RegistrationOptions::shows_nothing`]), `given` for the others;
 /// none when no frame is blank. A build's frame selection leaves such frames out before this;
@@ -975,6 +1121,12 @@ fn blank_statuses(view: &RegistrationView) -> Vec<(String, bool)> {
         .collect()
 }
 
+/// Each frame's status after tracking (`given` for the first) and whether it is flagged.
+/// Frames from where the track was lost on are flagged (`track_lost`) even when the tracker
+/// accepted them: they were tracked from poses extrapolated past the loss. On ATM_307 (80
+/// frames) the track was lost at frame 14 and 14 frames after it were accepted 65-118 mm and
+/// 34-68 deg off; the rounds over them and the 14 good ones were not kept, and they went
+/// into the texture.
 fn tracked_statuses(state: &TrackState) -> Vec<(String, bool)> {
     let lost = state.first_lost.unwrap_or(usize::MAX);
     state
