@@ -607,7 +607,13 @@ fn build_leaves_out_the_frames_blurred_against_the_model() {
         .filter(|f| f.status == "blurred")
         .map(|f| f.frame)
         .collect();
-    println!("blurred {blurred:?}, flagged {flagged:?}");
+    println!(
+        "blurred {blurred:?}, flagged {flagged:?}; rounds {:?}",
+        reg.rounds
+            .iter()
+            .map(|r| (&r.against, r.discarded, &r.counts))
+            .collect::<Vec<_>>()
+    );
     // Measured: blurred 8, 13, 24, 28, 29, flagged all but 29; the sharp frames' sharpness
     // against the model 0.90-1.36 of the median, the blurred ones' 0.46-0.74. On 24 frames
     // over the whole path (three times the pace) the sharp ones' spread 0.61-1.90 and the

@@ -15,7 +15,9 @@ pub struct FramePoseResult {
     pub correction_mm: f64,
     /// Rotation between the given and the refined camera (degrees).
     pub correction_deg: f64,
-    /// How its last round ended (`converged`, `not_converged`, `outlier`, ...).
+    /// How its last round ended (`converged`, `not_converged`, `outlier`, ...), or why it
+    /// was not registered or not used: `blank` (it shows next to nothing), `blurred` (far less
+    /// sharp than the model predicts it; its pose is the first rounds'), `track_lost`.
     pub status: String,
     /// The model was built with this frame (flagged frames are left out).
     pub used: bool,

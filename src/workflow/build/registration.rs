@@ -139,7 +139,7 @@ pub fn register_poses(
         &mut last_light,
     )?;
     let blurred = match &last_light {
-        Some(light) if rounds_to_run > 0 => {
+        Some(light) if sharpness_can_be_judged(&run.rounds) => {
             let sharp_so_far: Vec<usize> = rounds_on
                 .iter()
                 .copied()
@@ -1015,6 +1015,20 @@ const MIN_FRAMES_FOR_BLUR: usize = 8;
 /// blurred frames scored 0.26-0.67 of the median and sharp ones 0.79 and up; a real airway
 /// tree's sharp frames (ATM_307) 0.92 and up (BENCHMARKS.md, session 35).
 const BLURRED_BELOW: f64 = 0.7;
+
+/// Whether the rounds `rounds` left poses and a texture consistent enough to judge a frame's
+/// sharpness against the model: at least two rounds kept, and three quarters of the last
+/// one's frames converged. After one kept round from 3 mm / 4 deg off (0.5-0.7 mm / 1.7-2.5
+/// deg after it), or at the given poses when every round was discarded, 1-5 of 24 sharp
+/// frames scored as blurred.
+fn sharpness_can_be_judged(rounds: &[RoundSummary]) -> bool {
+    let kept: Vec<&RoundSummary> = rounds.iter().filter(|r| !r.discarded).collect();
+    kept.last().is_some_and(|r| {
+        let count = |k: &str| r.counts.get(k).copied().unwrap_or(0);
+        let converged = count("converged") + count("not_converged");
+        kept.len() >= 2 && 4 * converged >= 3 * r.counts.values().sum::<usize>()
+    })
+}
 
 /// Among the frames `on` of `scene` (increasing indices), those far less sharp than the
 /// model predicts them ([`blurred_frames`]); none with fewer than [`MIN_FRAMES_FOR_BLUR`].
