@@ -377,10 +377,8 @@ fn build_keeps_exact_poses_when_refining_does_not_predict_held_out_frames_better
     assert!(moved > 12, "the rounds moved {moved} of 24 poses");
 }
 
-#[test]
-fn register_command_writes_poses_and_a_report_and_refuses_bad_input() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
+/// A 12-frame 128x128 phantom in `case_dir` whose poses carry 1 mm / 1 degree of error.
+fn small_tracker_phantom(case_dir: &Path) {
     let opts = PhantomOptions {
         frames: 12,
         width: 128,
@@ -388,7 +386,14 @@ fn register_command_writes_poses_and_a_report_and_refuses_bad_input() {
         pose_noise: PoseNoise::new(1.0, 1.0),
         ..Default::default()
     };
-    write_phantom_case(&dir.join("case"), &opts).unwrap();
+    write_phantom_case(case_dir, &opts).unwrap();
+}
+
+#[test]
+fn register_command_writes_poses_and_a_report_and_refuses_bad_input() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    small_tracker_phantom(&dir.join("case"));
     let bin = env!("CARGO_BIN_EXE_bronchosim");
     let run = |args: &[&str]| {
         std::process::Command::new(bin)
@@ -498,15 +503,8 @@ fn a_black_frame_is_left_out_by_register_and_by_a_build_without_a_selection() {
     // ("too few pixels obey the shading model") before the registration flagged such frames.
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let opts = PhantomOptions {
-        frames: 12,
-        width: 128,
-        height: 128,
-        pose_noise: PoseNoise::new(1.0, 1.0),
-        ..Default::default()
-    };
     let case_dir = dir.join("case");
-    write_phantom_case(&case_dir, &opts).unwrap();
+    small_tracker_phantom(&case_dir);
     let black = case_dir.join("frames/000005.png");
     bronchosim::io::png::write_png_srgb8(&black, &Frame::new(128, 128)).unwrap();
     let build_opts = BuildOptions {

@@ -128,28 +128,33 @@ pub fn register_poses(
         .filter(|&i| statuses.get(i).is_none_or(|s| !s.1))
         .collect();
     let warnings_before = warnings.len();
-    let (mut run, mut refined_score) = rounds_on_frames(
-        scene,
-        &view,
-        &rounds_on,
-        rounds_to_run,
-        opts,
-        warnings,
-        &mut statuses,
-        &mut last_light,
-    )?;
-    let blurred = match &last_light {
-        Some(light) if sharpness_can_be_judged(&run.rounds) => {
-            let sharp_so_far: Vec<usize> = rounds_on
-                .iter()
-                .copied()
-                .filter(|&i| statuses.get(i).is_none_or(|s| !s.1))
-                .collect();
-            blurred_among(scene, &view, &sharp_so_far, light, opts)?
+    let mut on = rounds_on.clone();
+    let mut blurred: Vec<usize> = Vec::new();
+    let (run, refined_score) = loop {
+        let (run, score) = rounds_on_frames(
+            scene,
+            &view,
+            &on,
+            rounds_to_run,
+            opts,
+            warnings,
+            &mut statuses,
+            &mut last_light,
+        )?;
+        let found = match &last_light {
+            Some(light) if blurred.is_empty() && sharpness_can_be_judged(&run.rounds) => {
+                let sharp_so_far: Vec<usize> = on
+                    .iter()
+                    .copied()
+                    .filter(|&i| statuses.get(i).is_none_or(|s| !s.1))
+                    .collect();
+                blurred_among(scene, &view, &sharp_so_far, light, opts)?
+            }
+            _ => Vec::new(),
+        };
+        if found.is_empty() {
+            break (run, score);
         }
-        _ => Vec::new(),
-    };
-    if !blurred.is_empty() {
         // Fused into the registration's texture, blurred frames smear it for every frame: the
         // rounds run again without them, from the poses they started from (demo phantom, a
         // fifth of the frames blurred, a tracker's 1.5 mm / 2 deg: 0.125 mm / 0.550 deg with
@@ -157,12 +162,12 @@ pub fn register_poses(
         warnings.truncate(warnings_before);
         warnings.push(format!(
             "registration: {} of {} frames are far less sharp than the model predicts them from their poses (motion blur or defocus): the rounds were run again without them, and they are left out of the model",
-            blurred.len(),
-            rounds_on.len()
+            found.len(),
+            on.len()
         ));
         // A blurred frame keeps the pose the first rounds refined (written, not used).
         let mut start = given.clone();
-        for &i in &blurred {
+        for &i in &found {
             start[i] = scene.poses[i];
         }
         set_poses(scene, start, opts);
@@ -170,25 +175,12 @@ pub fn register_poses(
             true => vec![("given".to_string(), false); scene.frame_count()],
             false => tracked.clone(),
         };
-        for &i in &blurred {
+        for &i in &found {
             statuses[i] = (BLURRED.to_string(), true);
         }
-        let sharp: Vec<usize> = rounds_on
-            .iter()
-            .copied()
-            .filter(|i| !blurred.contains(i))
-            .collect();
-        (run, refined_score) = rounds_on_frames(
-            scene,
-            &view,
-            &sharp,
-            rounds_to_run,
-            opts,
-            warnings,
-            &mut statuses,
-            &mut last_light,
-        )?;
-    }
+        on.retain(|i| !found.contains(i));
+        blurred = found;
+    };
     let RoundsRun {
         rounds,
         given_score,
