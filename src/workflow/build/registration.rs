@@ -165,7 +165,8 @@ pub fn register_poses(
             found.len(),
             on.len()
         ));
-        // A blurred frame keeps the pose the first rounds refined (written, not used).
+        // A blurred frame keeps the pose the first rounds refined (written, not used;
+        // without a tracker a flagged frame is then placed between its neighbours, below).
         let mut start = given.clone();
         for &i in &found {
             start[i] = scene.poses[i];
@@ -224,8 +225,8 @@ pub fn register_poses(
                 correction_mm: d.mm(),
                 correction_deg: d.deg(),
                 status,
-                // Kept given poses are all used, but not a frame the tracker lost nor one
-                // that shows nothing.
+                // Kept given poses are all used, but not a frame the tracker lost, one that
+                // shows nothing or a blurred one.
                 used: !is_flagged || (kept_given && !first && !unusable),
             }
         })
@@ -258,20 +259,27 @@ pub fn register_poses(
         .into());
     }
     if left_out > 0 {
-        let blank = results
-            .iter()
-            .filter(|r| r.status == FrameStatus::Blank.name())
-            .count();
-        let why = match (blank, left_out - blank) {
-            (0, _) => "whose pose could not be trusted".to_string(),
-            (b, 0) => format!("that show next to nothing (dark or saturated; {b})"),
-            (b, u) => format!(
-                "that show next to nothing (dark or saturated; {b}) or whose pose could not be trusted ({u})"
-            ),
+        let with = |status: &str| {
+            results
+                .iter()
+                .filter(|r| !r.used && r.status == status)
+                .count()
         };
+        let (blank, blurred) = (with(FrameStatus::Blank.name()), with(BLURRED));
+        let untrusted = left_out - blank - blurred;
+        let why: Vec<String> = [
+            (blank, "show next to nothing (dark or saturated)"),
+            (blurred, "blurred"),
+            (untrusted, "with a pose that could not be trusted"),
+        ]
+        .iter()
+        .filter(|(n, _)| *n > 0)
+        .map(|(n, what)| format!("{n} {what}"))
+        .collect();
         warnings.push(format!(
-            "registration left out {left_out} of {} frames {why} (registration.frames in model.json, or in register's registration.json, says which and why)",
-            results.len()
+            "registration left out {left_out} of {} frames: {} (registration.frames in model.json, or in register's registration.json, says which and why)",
+            results.len(),
+            why.join(", ")
         ));
         scene.keep_frames(&keep, opts.depth_cache_bytes);
     }
@@ -1034,20 +1042,21 @@ fn blurred_among(
     if on.len() < MIN_FRAMES_FOR_BLUR {
         return Ok(Vec::new());
     }
-    let on_view = view.subset(on);
     let blurred = scene.on_frames(on, opts.depth_cache_bytes, |scene| {
-        blurred_frames(scene, &on_view, light, opts)
+        blurred_frames(scene, view, on, light, opts)
     })?;
     Ok(blurred.into_iter().map(|k| on[k]).collect())
 }
 
 /// The frames of `scene` (indices) far less sharp than the model predicts them from their
 /// poses: the light `light` and a texture fused from the frames at those poses, rendered
-/// where the view's frames are compared (`view`, reduced), on the pixels neither dark nor
-/// saturated, away from the prediction's edges.
+/// where the view's frames are compared (`view`, reduced; frame `i` of the scene is the
+/// view's `in_view[i]`), on the pixels neither dark nor saturated, away from the
+/// prediction's edges.
 fn blurred_frames(
     scene: &BuildScene,
     view: &RegistrationView,
+    in_view: &[usize],
     light: &CalibratedModel,
     opts: &BuildOptions,
 ) -> Result<Vec<usize>> {
@@ -1070,7 +1079,7 @@ fn blurred_frames(
                 }
                 use_px[k] = true;
             }
-            let frame = &view.frames[i];
+            let frame = &view.frames[in_view[i]];
             for (k, ok) in use_px.iter_mut().enumerate() {
                 let px = &frame.rgb[3 * k..3 * k + 3];
                 let brightest = px.iter().fold(0.0f32, |a, &v| a.max(v));
