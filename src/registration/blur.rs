@@ -8,6 +8,7 @@
 //! least 0.79 there, and 0.92 on that airway tree.
 
 use crate::image::Frame;
+use crate::shading::LUMA;
 
 /// Per direction (along x, along y and both diagonals), the mean squared difference of
 /// neighbouring pixels' luminance over the pixels `use_px` keeps (both of a pair), divided by
@@ -19,7 +20,7 @@ pub fn gradient_energies(frame: &Frame, use_px: &[bool], min_pixels: usize) -> O
     let lum: Vec<f64> = frame
         .rgb
         .chunks_exact(3)
-        .map(|p| 0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2]))
+        .map(|p| (0..3).map(|c| LUMA[c] * f64::from(p[c])).sum())
         .collect();
     let smooth = binomial_3x3(&lum, use_px, w, h);
     let (mut sum, mut count) = (0.0, 0usize);

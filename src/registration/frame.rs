@@ -133,11 +133,16 @@ impl RegistrationOptions {
                 continue;
             }
             inside += 1;
-            let brightest = px.iter().fold(0.0f32, |a, &v| a.max(v));
-            usable +=
-                usize::from(brightest >= self.noise_floor && brightest < self.saturation_level);
+            usable += usize::from(self.comparable(px));
         }
         (usable as f64) < self.blank_below * inside.max(1) as f64
+    }
+
+    /// Whether a pixel's RGB can be compared with the model: its brightest channel at or
+    /// above the noise floor, and none saturated.
+    pub fn comparable(&self, px: &[f32]) -> bool {
+        let brightest = px.iter().fold(0.0f32, |a, &v| a.max(v));
+        brightest >= self.noise_floor && brightest < self.saturation_level
     }
 }
 

@@ -1081,10 +1081,7 @@ fn blurred_frames(
             }
             let frame = &view.frames[in_view[i]];
             for (k, ok) in use_px.iter_mut().enumerate() {
-                let px = &frame.rgb[3 * k..3 * k + 3];
-                let brightest = px.iter().fold(0.0f32, |a, &v| a.max(v));
-                *ok &= brightest >= ro.noise_floor
-                    && brightest < ro.saturation_level
+                *ok &= ro.comparable(&frame.rgb[3 * k..3 * k + 3])
                     && view.mask.as_ref().is_none_or(|m| m[k]);
             }
             let use_px = erode(&erode(&use_px, w, h), w, h);
