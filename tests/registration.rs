@@ -626,6 +626,62 @@ fn build_leaves_out_the_frames_blurred_against_the_model() {
     );
     assert!(reg.frames.iter().all(|f| f.status != "blurred" || !f.used));
     assert!(m.fit_quality.iter().all(|f| !flagged.contains(&f.frame)));
+
+    // The same video with its true poses, trusted as given (`--poses fixed`): no registration
+    // runs, and the check runs at the given poses.
+    let truth = true_poses(&case_dir);
+    let exact: Vec<PoseEntry> = case.poses[..kept]
+        .iter()
+        .zip(&truth)
+        .map(|(e, p)| PoseEntry {
+            frame: e.frame.clone(),
+            pose: Pose::new(*p),
+        })
+        .collect();
+    write_poses(&case_dir.join("poses.json"), &exact, &case_dir).unwrap();
+    let opts = BuildOptions {
+        cross_validate_every: 0,
+        shading: Some(ShadingKind::Calibrated),
+        poses: PosesMode::Fixed,
+        quiet: true,
+        ..Default::default()
+    };
+    let m = build_model(&case_dir, &dir.join("fixed"), &opts).unwrap();
+    assert!(m.registration.is_none());
+    let check = m.blur_check.as_ref().expect("model.json records the check");
+    let flagged: Vec<usize> = check
+        .frames
+        .iter()
+        .filter(|f| f.blurred)
+        .map(|f| f.frame)
+        .collect();
+    let sharpest_blurred = check
+        .frames
+        .iter()
+        .filter(|f| blurred.contains(&f.frame))
+        .filter_map(|f| f.relative_sharpness)
+        .fold(0.0, f64::max);
+    let least_sharp = check
+        .frames
+        .iter()
+        .filter(|f| !blurred.contains(&f.frame))
+        .filter_map(|f| f.relative_sharpness)
+        .fold(f64::INFINITY, f64::min);
+    println!(
+        "fixed poses: flagged {flagged:?}; sharpness of the blurred up to {sharpest_blurred:.2}, of the sharp from {least_sharp:.2}"
+    );
+    // Measured: 8, 13, 24 and 28 flagged, the mildest blur (29, the last frame) at 0.76 of
+    // the median; the sharp frames from 0.90.
+    assert!(
+        flagged.iter().all(|f| blurred.contains(f)) && flagged.len() + 1 >= blurred.len(),
+        "blurred {blurred:?}, flagged {flagged:?}"
+    );
+    assert!(
+        least_sharp > 0.8,
+        "a sharp frame at {least_sharp:.2} of the median"
+    );
+    assert!(m.fit_quality.iter().all(|f| !flagged.contains(&f.frame)));
+    assert!(m.warnings.iter().any(|w| w.contains("less sharp")));
 }
 
 #[test]

@@ -48,6 +48,10 @@ pub struct BuildTimings {
     /// Registration of the poses to the CT (every round: light, texture, poses).
     #[serde(default)]
     pub registration: f64,
+    /// With the poses trusted as given, the check for blurred frames (a light and a texture
+    /// at the given poses, and every frame's prediction).
+    #[serde(default)]
+    pub blur_check: f64,
     /// Per-frame ray cast, samples and Psi fit (all frames).
     pub fit: f64,
     /// The calibrated light fit on the pooled samples.
@@ -106,6 +110,11 @@ pub struct ModelManifest {
     /// How the poses were registered to the CT (`None`: trusted as given, `--poses fixed`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub registration: Option<PoseRegistration>,
+    /// With the poses trusted as given (`--poses fixed`): every frame's sharpness against the
+    /// model's prediction from its pose, and which were left out as blurred (absent when not
+    /// run; a registration records its own check in `registration.blur_check`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blur_check: Option<crate::model::blur_check::BlurCheck>,
     /// The poses against the true poses of `build --truth` (absent without them).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pose_truth: Option<PoseTruth>,

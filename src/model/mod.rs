@@ -1,6 +1,7 @@
 //! The model folder (DESIGN.md "Output: the model folder"): its manifest and shading types,
 //! and loading a built model back for rendering.
 
+pub mod blur_check;
 pub mod cross_validation;
 pub mod load;
 pub mod manifest;

@@ -82,6 +82,10 @@ pub struct PoseRegistration {
     /// on too few frames.
     #[serde(default)]
     pub consensus_start: bool,
+    /// Every frame's sharpness against the model after the first rounds, when it could be
+    /// judged (frames found blurred were left out and the rounds run again without them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blur_check: Option<crate::model::blur_check::BlurCheck>,
     /// Before/after overlays of a few frames, for the reports (not written to model.json).
     #[serde(skip)]
     pub overlays: Vec<PoseOverlay>,

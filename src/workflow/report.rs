@@ -436,8 +436,8 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
     let _ = write!(
         html,
         "<h2>Timings (s)</h2><table><tr><th>read case</th><th>segment</th><th>mesh</th><th>atlas</th>\
-         <th>frame selection</th><th>registration</th><th>fit Psi</th><th>calibrated light</th><th>cross-validation</th><th>de-light + fuse</th>\
-         </tr><tr><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td>\
+         <th>frame selection</th><th>registration</th><th>blur check</th><th>fit Psi</th><th>calibrated light</th><th>cross-validation</th><th>de-light + fuse</th>\
+         </tr><tr><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.2}</td>\
          <td>{:.2}</td><td>{:.2}</td><td>{:.2}</td></tr></table>",
         t.read_case,
         t.segment,
@@ -445,6 +445,7 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
         t.atlas,
         t.selection,
         t.registration,
+        t.blur_check,
         t.fit,
         t.calibrated_fit,
         t.cross_validation,

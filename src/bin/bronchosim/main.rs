@@ -94,6 +94,7 @@ fn build(a: BuildArgs, quiet: bool) -> anyhow::Result<String> {
         ..Default::default()
     };
     opts.selection.max_frames = a.max_frames;
+    opts.leave_out_blurred = !a.keep_blurred;
     opts.tracking.refine_first = !a.trust_first_pose;
     opts.atlas.texel_mm = a.texel_mm;
     opts.segment.mesh.decimate.target_edge_mm = a.edge_mm;

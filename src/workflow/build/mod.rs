@@ -7,6 +7,7 @@
 //!                                                  frames not chosen are left out)
 //! register the poses to CT   ─► PoseRegistration  (registration.rs: rounds of light, texture,
 //!                                                  every frame's pose; flagged frames left out)
+//! poses trusted as given     ─► BlurCheck         (blur_check.rs: blurred frames left out)
 //! first pass over the frames ─► FitPass + pooled samples   (fit_pass.rs: ray cast, Psi per frame)
 //! calibrated light           ─► CalibratedLight   (light.rs, gain_correction.rs, light_refit.rs)
 //! cross-validation           ─► the shading model in use   (cross_validation.rs)
@@ -17,6 +18,7 @@
 //! A new stage is a file here that takes the [`BuildScene`] and earlier stages' outputs and
 //! returns its own plain output, and one line in [`build_model`].
 
+mod blur_check;
 mod cross_validation;
 mod error;
 mod fit_pass;
@@ -75,6 +77,13 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
     let registration = timed(&mut timings.registration, || {
         registration::register_poses(&mut scene, opts, selection.as_mut(), &mut warnings)
     })?;
+    // Trusted poses get the check the registration runs after its rounds.
+    let blur_check = match (&registration, opts.leave_out_blurred) {
+        (None, true) => timed(&mut timings.blur_check, || {
+            blur_check::leave_out_blurred(&mut scene, opts, &mut warnings)
+        })?,
+        _ => None,
+    };
     let pose_truth = poses_against_truth(
         registration.as_ref(),
         &scene,
@@ -102,6 +111,7 @@ pub fn build_model(case_dir: &Path, out: &Path, opts: &BuildOptions) -> Result<M
         light_fit,
         selection,
         registration,
+        blur_check,
         pose_truth,
         cross_validation,
         textures: &textures,

@@ -138,6 +138,9 @@ pub struct BuildOptions {
     /// 5 mm / 6 deg: the given poses were kept; now 28 of 30 frames within 1 mm and 1 deg;
     /// from 6 mm / 7 deg, 9 runs to settle; BENCHMARKS.md, session 27).
     pub registration_consensus_passes: usize,
+    /// Frames far less sharp than the model predicts them from their poses (motion blur,
+    /// defocus) are left out of the model (`super::blur_check`; `--keep-blurred` keeps them).
+    pub leave_out_blurred: bool,
     /// Tracking from the first pose (`--poses first`).
     pub tracking: super::tracking::TrackingOptions,
     /// The registration stops when a round moves the median pose less than this (mm) and less
@@ -236,6 +239,7 @@ impl Default for BuildOptions {
             // without (BENCHMARKS.md, session 25).
             registration_geometry_repeat_share: 0.2,
             registration_min_converged_share: 0.25,
+            leave_out_blurred: true,
             registration_keep_margin_db: 1.0,
             registration_tolerance_mm: 0.05,
             registration_light_refinements: 0,

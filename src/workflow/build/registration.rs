@@ -31,6 +31,7 @@
 //! video's) are left out of the model, never silently kept: [`PoseRegistration`] says which and
 //! why, and model.json counts them.
 
+use super::blur_check::{blurred_in, judge_sharpness, BLURRED};
 use super::cross_validation::cross_validate;
 use super::error::BuildError;
 use super::fit_pass::{fit_pass, LightSamples};
@@ -47,8 +48,6 @@ use crate::io::poses::PoseEntry;
 use crate::math::Affine;
 use crate::model::registration::{FramePoseResult, PoseOverlay, PoseRegistration, RoundSummary};
 use crate::model::selection::FrameSelection;
-use crate::registration::blur::sharpness_against;
-use crate::registration::photometric::{PhotometricModel, RayGrid};
 use crate::registration::{
     blocks::BlockOptions, consensus::consensus_poses, delta_between, interpolate_flagged,
     register_round, FrameRegistration, FrameStatus, ModelParts, RegistrationOptions, RoundKind,
@@ -130,6 +129,7 @@ pub fn register_poses(
     let warnings_before = warnings.len();
     let mut on = rounds_on.clone();
     let mut blurred: Vec<usize> = Vec::new();
+    let mut blur_check = None;
     let (run, refined_score) = loop {
         let (run, score) = rounds_on_frames(
             scene,
@@ -142,13 +142,20 @@ pub fn register_poses(
             &mut last_light,
         )?;
         let found = match &last_light {
-            Some(light) if blurred.is_empty() && sharpness_can_be_judged(&run.rounds) => {
+            Some(light)
+                if opts.leave_out_blurred
+                    && blurred.is_empty()
+                    && sharpness_can_be_judged(&run.rounds) =>
+            {
                 let sharp_so_far: Vec<usize> = on
                     .iter()
                     .copied()
                     .filter(|&i| statuses.get(i).is_none_or(|s| !s.1))
                     .collect();
-                blurred_among(scene, &view, &sharp_so_far, light, opts)?
+                let check = judge_sharpness(scene, &view, &sharp_so_far, light, opts)?;
+                let found = blurred_in(&check, &sharp_so_far);
+                blur_check = Some(check);
+                found
             }
             _ => Vec::new(),
         };
@@ -299,6 +306,7 @@ pub fn register_poses(
         scope_light,
         lambert_lamp,
         consensus_start,
+        blur_check,
         overlays,
         given,
         poses,
@@ -405,7 +413,7 @@ impl RegistrationView {
         }
     }
 
-    fn new(scene: &BuildScene, quiet: bool) -> Result<RegistrationView> {
+    pub(super) fn new(scene: &BuildScene, quiet: bool) -> Result<RegistrationView> {
         let full = &scene.case.camera;
         let level = (scene.level..=4)
             .find(|&l| full.width >> l <= 400 || full.width.min(full.height) >> (l + 1) < 64)
@@ -1003,19 +1011,6 @@ fn overlays(
     )
 }
 
-/// A frame's status when it is far less sharp than the model predicts it ([`blurred_frames`]).
-const BLURRED: &str = "blurred";
-
-/// Fewest frames whose median sharpness against the model is a reference for blur.
-const MIN_FRAMES_FOR_BLUR: usize = 8;
-
-/// Share of the video's median sharpness against the model's prediction
-/// ([`crate::registration::blur::sharpness_against`]) under which a frame is blurred. On the
-/// demo phantom with a fifth of its frames motion-blurred (`phantom --motion-blur-share 0.2`)
-/// blurred frames scored 0.26-0.67 of the median and sharp ones 0.79 and up; a real airway
-/// tree's sharp frames (ATM_307) 0.92 and up (BENCHMARKS.md, session 35).
-const BLURRED_BELOW: f64 = 0.7;
-
 /// Whether the rounds `rounds` left poses and a texture consistent enough to judge a frame's
 /// sharpness against the model: at least two rounds kept, and three quarters of the last
 /// one's frames converged. After one kept round from 3 mm / 4 deg off (0.5-0.7 mm / 1.7-2.5
@@ -1028,84 +1023,6 @@ fn sharpness_can_be_judged(rounds: &[RoundSummary]) -> bool {
         let converged = count("converged") + count("not_converged");
         kept.len() >= 2 && 4 * converged >= 3 * r.counts.values().sum::<usize>()
     })
-}
-
-/// Among the frames `on` of `scene` (increasing indices), those far less sharp than the
-/// model predicts them ([`blurred_frames`]); none with fewer than [`MIN_FRAMES_FOR_BLUR`].
-fn blurred_among(
-    scene: &mut BuildScene,
-    view: &RegistrationView,
-    on: &[usize],
-    light: &CalibratedModel,
-    opts: &BuildOptions,
-) -> Result<Vec<usize>> {
-    if on.len() < MIN_FRAMES_FOR_BLUR {
-        return Ok(Vec::new());
-    }
-    let blurred = scene.on_frames(on, opts.depth_cache_bytes, |scene| {
-        blurred_frames(scene, view, on, light, opts)
-    })?;
-    Ok(blurred.into_iter().map(|k| on[k]).collect())
-}
-
-/// The frames of `scene` (indices) far less sharp than the model predicts them from their
-/// poses: the light `light` and a texture fused from the frames at those poses, rendered
-/// where the view's frames are compared (`view`, reduced; frame `i` of the scene is the
-/// view's `in_view[i]`), on the pixels neither dark nor saturated, away from the
-/// prediction's edges.
-fn blurred_frames(
-    scene: &BuildScene,
-    view: &RegistrationView,
-    in_view: &[usize],
-    light: &CalibratedModel,
-    opts: &BuildOptions,
-) -> Result<Vec<usize>> {
-    let texture = consensus_texture(scene, light, opts)?;
-    let model = PhotometricModel::new(view.model_parts(scene, light, Some(&texture)))?;
-    let grid = RayGrid::new(&view.camera, 0, 1);
-    let ro = RegistrationOptions::default();
-    let (w, h) = (view.camera.width as usize, view.camera.height as usize);
-    let progress = Progress::new("sharpness", scene.frame_count() as u64, opts.quiet);
-    let ratios: Vec<Option<f64>> = (0..scene.frame_count())
-        .into_par_iter()
-        .map(|i| {
-            let seen = model.view(&grid, &scene.poses[i], ro.min_gamma);
-            let mut predicted = Frame::new(w as u32, h as u32);
-            let mut use_px = vec![false; w * h];
-            for p in &seen.points {
-                let k = p.ray as usize;
-                for c in 0..3 {
-                    predicted.rgb[3 * k + c] = (p.radiance[c] + seen.offset[c]) as f32;
-                }
-                use_px[k] = true;
-            }
-            let frame = &view.frames[in_view[i]];
-            for (k, ok) in use_px.iter_mut().enumerate() {
-                *ok &= ro.comparable(&frame.rgb[3 * k..3 * k + 3])
-                    && view.mask.as_ref().is_none_or(|m| m[k]);
-            }
-            let use_px = erode(&erode(&use_px, w, h), w, h);
-            progress.inc();
-            sharpness_against(frame, &predicted, &use_px, w * h / 20)
-        })
-        .collect();
-    progress.finish();
-    let median = median(ratios.iter().flatten().copied().collect());
-    Ok((0..ratios.len())
-        .filter(|&i| ratios[i].is_some_and(|r| r < BLURRED_BELOW * median))
-        .collect())
-}
-
-/// `keep` without the pixels next to one it does not keep (3x3).
-fn erode(keep: &[bool], w: usize, h: usize) -> Vec<bool> {
-    (0..w * h)
-        .map(|i| {
-            let (x, y) = (i % w, i / w);
-            keep[i]
-                && (y.saturating_sub(1)..(y + 2).min(h))
-                    .all(|yy| (x.saturating_sub(1)..(x + 2).min(w)).all(|xx| keep[yy * w + xx]))
-        })
-        .collect()
 }
 
 /// With a tracker's poses, every frame's status before the rounds: `blank` (flagged) for a

@@ -40,6 +40,8 @@ pub struct BuiltModel<'a> {
     pub selection: Option<FrameSelection>,
     /// How the poses were registered, when they were.
     pub registration: Option<PoseRegistration>,
+    /// Which frames were blurred, when the poses were trusted as given.
+    pub blur_check: Option<crate::model::blur_check::BlurCheck>,
     /// The poses against the truth's, when `--truth` has a poses.json.
     pub pose_truth: Option<PoseTruth>,
     /// The cross-validation of the shading models, when it ran.
@@ -144,6 +146,7 @@ fn write_model_files(out_dir: &OutputDir, built: &BuiltModel) -> Result<ModelMan
         cross_validation: built.cross_validation.clone(),
         light_fit: built.light_fit.clone(),
         registration: built.registration.clone(),
+        blur_check: built.blur_check.clone(),
         pose_truth: built.pose_truth.clone(),
         frame_selection: built.selection.clone(),
         unseen_walls: Some(unseen_walls(built, atlas.texel_mm)),
