@@ -7,8 +7,53 @@
 //! the prediction, blurred frames scored at most 0.67 of the video's median and sharp ones at
 //! least 0.79 there, and 0.92 on that airway tree.
 
+use super::frame::RegistrationOptions;
+use super::photometric::{PhotometricModel, RayGrid};
 use crate::image::Frame;
+use crate::math::Affine;
 use crate::shading::LUMA;
+
+/// `frame`'s sharpness against `model`'s prediction of it from `pose` ([`sharpness_against`]),
+/// rendered on `grid` (one ray per pixel of `frame`), on the pixels the frame and the
+/// prediction both show (`opts`: neither dark nor saturated, within `mask`) two pixels inside
+/// the prediction's edges. `None` with fewer than a twentieth of the pixels to compare.
+pub fn sharpness_at_pose(
+    model: &PhotometricModel,
+    grid: &RayGrid,
+    pose: &Affine,
+    frame: &Frame,
+    mask: Option<&[bool]>,
+    opts: &RegistrationOptions,
+) -> Option<f64> {
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    let seen = model.view(grid, pose, opts.min_gamma);
+    let mut predicted = Frame::new(w as u32, h as u32);
+    let mut use_px = vec![false; w * h];
+    for p in &seen.points {
+        let k = p.ray as usize;
+        for c in 0..3 {
+            predicted.rgb[3 * k + c] = (p.radiance[c] + seen.offset[c]) as f32;
+        }
+        use_px[k] = true;
+    }
+    for (k, ok) in use_px.iter_mut().enumerate() {
+        *ok &= opts.comparable(&frame.rgb[3 * k..3 * k + 3]) && mask.is_none_or(|m| m[k]);
+    }
+    let use_px = erode(&erode(&use_px, w, h), w, h);
+    sharpness_against(frame, &predicted, &use_px, w * h / 20)
+}
+
+/// `keep` without the pixels next to one it does not keep (3x3).
+fn erode(keep: &[bool], w: usize, h: usize) -> Vec<bool> {
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            keep[i]
+                && (y.saturating_sub(1)..(y + 2).min(h))
+                    .all(|yy| (x.saturating_sub(1)..(x + 2).min(w)).all(|xx| keep[yy * w + xx]))
+        })
+        .collect()
+}
 
 /// Per direction (along x, along y and both diagonals), the mean squared difference of
 /// neighbouring pixels' luminance over the pixels `use_px` keeps (both of a pair), divided by

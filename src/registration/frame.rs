@@ -179,6 +179,9 @@ pub enum FrameStatus {
     /// The frame shows next to nothing, dark or saturated
     /// ([`RegistrationOptions::shows_nothing`]): not registered, and left out.
     Blank,
+    /// The frame is far less sharp than the model predicts it from its pose (motion blur,
+    /// defocus; [`super::blur`]): left out.
+    Blurred,
 }
 
 impl FrameStatus {
@@ -192,6 +195,7 @@ impl FrameStatus {
             FrameStatus::HighCost => "high_cost",
             FrameStatus::Outlier => "outlier",
             FrameStatus::Blank => "blank",
+            FrameStatus::Blurred => "blurred",
         }
     }
 }

@@ -15,6 +15,7 @@
 //! count towards the loss; the frame after a gap is tried from more starts (the scope may
 //! have stopped, gone on, or turned while unseen).
 
+use super::blur::sharpness_at_pose;
 use super::chroma::ChromaAlbedo;
 use super::frame::RegistrationOptions;
 use super::frame::{FrameObs, FrameRegistrar, FrameRegistration, FrameStatus};
@@ -67,6 +68,16 @@ pub struct TrackOptions {
     /// does not. A blackout of 2-5 frames at frame 30 of the demo's video lost the track
     /// without; with, the frames after it ended within 1 mm (BENCHMARKS.md, session 34).
     pub relocalise_deg: f64,
+    /// Against texture, an accepted frame whose sharpness against the model's prediction from
+    /// its pose ([`super::blur::sharpness_at_pose`]) is under this share of the recent accepted
+    /// frames' median is not accepted but flagged `blurred`: it does not count towards the
+    /// loss, and the frame after it is tried as after a gap (0: never). Registered and fused
+    /// into the texture the next frames are tracked against, blurred frames led the demo's
+    /// video with a fifth of its frames motion-blurred 11-45 deg off in its last frames
+    /// (BENCHMARKS.md, session 36).
+    pub blurred_below: f64,
+    /// Accepted frames whose sharpness makes that median (at least 4 are needed to judge).
+    pub sharpness_window: usize,
 }
 
 impl Default for TrackOptions {
@@ -82,6 +93,8 @@ impl Default for TrackOptions {
             against_texture: true,
             geometry_from_level: 2,
             relocalise_deg: 10.0,
+            blurred_below: 0.7,
+            sharpness_window: 9,
         }
     }
 }
@@ -102,6 +115,9 @@ pub struct TrackState {
     pub accepted: Vec<bool>,
     /// Each frame's registration cost at its pose (NaN when not tracked).
     pub costs: Vec<f64>,
+    /// Each frame's sharpness against the model's prediction from its pose (NaN when not
+    /// judged).
+    pub sharpness: Vec<f64>,
     /// The first frame of the first run of `lost_after` flagged frames.
     pub first_lost: Option<usize>,
     flagged_in_row: usize,
@@ -123,6 +139,7 @@ impl TrackState {
             status: vec![None; n],
             accepted,
             costs: vec![f64::NAN; n],
+            sharpness: vec![f64::NAN; n],
             first_lost: None,
             flagged_in_row: 0,
             times: frame_numbers.iter().map(|&f| f as f64).collect(),
@@ -140,6 +157,7 @@ impl TrackState {
             self.status[i] = None;
             self.accepted[i] = false;
             self.costs[i] = f64::NAN;
+            self.sharpness[i] = f64::NAN;
         }
         self.first_lost = None;
         self.flagged_in_row = 0;
@@ -222,15 +240,21 @@ impl TrackState {
     }
 
     fn median_cost(&self, f: usize, window: usize) -> Option<f64> {
+        self.recent_median(&self.costs, f, window, 1)
+    }
+
+    /// The median of `values` over the last `window` accepted frames before `f` where they are
+    /// finite; `None` with fewer than `min` of them.
+    fn recent_median(&self, values: &[f64], f: usize, window: usize, min: usize) -> Option<f64> {
         let mut c: Vec<f64> = self
             .accepted_before(f)
             .into_iter()
             .rev()
-            .map(|i| self.costs[i])
+            .map(|i| values[i])
             .filter(|c| c.is_finite())
             .take(window)
             .collect();
-        if c.is_empty() {
+        if c.len() < min.max(1) {
             return None;
         }
         c.sort_by(f64::total_cmp);
@@ -259,6 +283,8 @@ pub fn interpolate_flagged(poses: &mut [Affine], flagged: &[bool], times: &[usiz
 /// divided by the albedo its colour predicts.
 pub struct Tracker<'a> {
     reg: FrameRegistrar<'a>,
+    /// Against texture: one ray per pixel, where a frame's sharpness is judged.
+    pixel_grid: Option<RayGrid>,
     /// Without texture: the colour–albedo relation the frames are divided by.
     chroma: Option<ChromaAlbedo>,
     opts: TrackOptions,
@@ -292,8 +318,11 @@ impl<'a> Tracker<'a> {
                 seen_from,
             )?),
         };
+        let pixel_grid = (opts.against_texture && opts.blurred_below > 0.0)
+            .then(|| RayGrid::new(parts.camera, 0, 1));
         Ok(Tracker {
             reg,
+            pixel_grid,
             chroma,
             opts: opts.clone(),
         })
@@ -348,6 +377,7 @@ impl<'a> Tracker<'a> {
                 pose: predicted,
                 gain,
                 cost: f64::NAN,
+                sharpness: None,
             });
         }
         let frame = self.prepare(&frames[f]);
@@ -412,6 +442,25 @@ impl<'a> Tracker<'a> {
             try_from(&mut best, &still)?;
         }
         let accepted = accept(&best);
+        let sharpness = match (&self.pixel_grid, accepted) {
+            (Some(grid), true) => {
+                sharpness_at_pose(&self.reg.model, grid, &best.pose, &frames[f], mask, ro)
+            }
+            _ => None,
+        };
+        let reference = state.recent_median(&state.sharpness, f, o.sharpness_window, 4);
+        if let (Some(s), Some(m)) = (sharpness, reference) {
+            if s < o.blurred_below * m {
+                return Ok(FrameTry {
+                    accepted: false,
+                    status: FrameStatus::Blurred,
+                    pose: predicted,
+                    gain,
+                    cost: best.cost_after,
+                    sharpness,
+                });
+            }
+        }
         let status = match best.status {
             _ if accepted => best.status,
             FrameStatus::Converged | FrameStatus::NotConverged if jumped(&best) => {
@@ -430,6 +479,7 @@ impl<'a> Tracker<'a> {
                 gain
             },
             cost: best.cost_after,
+            sharpness,
         })
     }
 }
@@ -461,6 +511,8 @@ pub struct FrameTry {
     pub gain: f64,
     /// Its registration cost.
     pub cost: f64,
+    /// Its sharpness against the model's prediction from its refined pose, when judged.
+    pub sharpness: Option<f64>,
 }
 
 impl TrackState {
@@ -468,12 +520,13 @@ impl TrackState {
     pub fn commit(&mut self, f: usize, t: &FrameTry, lost_after: usize) {
         self.accepted[f] = t.accepted;
         self.costs[f] = t.cost;
+        self.sharpness[f] = t.sharpness.filter(|_| t.accepted).unwrap_or(f64::NAN);
         self.poses[f] = t.pose;
         self.gains[f] = t.gain;
         self.status[f] = Some(t.status);
         if t.accepted {
             self.flagged_in_row = 0;
-        } else if t.status != FrameStatus::Blank {
+        } else if !matches!(t.status, FrameStatus::Blank | FrameStatus::Blurred) {
             self.flagged_in_row += 1;
             if self.flagged_in_row >= lost_after && self.first_lost.is_none() {
                 self.first_lost = Some(f + 1 - lost_after);
@@ -508,6 +561,7 @@ mod tests {
             pose,
             gain: 1.0,
             cost: 1.0,
+            sharpness: None,
         };
         state.commit(1, &try_at(along(2.0), true, false), 3);
         for f in 2..6 {

@@ -46,7 +46,22 @@ pub fn untracked_phantom_sized(
         },
         ..Default::default()
     };
-    write_phantom_case(case_dir, &opts).unwrap();
+    untracked_phantom_of(case_dir, &opts, kept).0
+}
+
+/// The phantom of `opts` written into `case_dir` with its first `kept` frames; their true
+/// poses and the frames among them the phantom motion-blurred.
+pub fn untracked_phantom_of(
+    case_dir: &Path,
+    opts: &PhantomOptions,
+    kept: usize,
+) -> (Vec<Affine>, Vec<usize>) {
+    let blurred = write_phantom_case(case_dir, opts)
+        .unwrap()
+        .blurred_frames
+        .into_iter()
+        .filter(|&f| f < kept)
+        .collect();
     let case = Case::open(case_dir).unwrap();
     for e in &case.poses[kept..] {
         let FrameRef::Image(p) = &e.frame else {
@@ -55,10 +70,11 @@ pub fn untracked_phantom_sized(
         std::fs::remove_file(p).unwrap();
     }
     write_poses(&case_dir.join("poses.json"), &case.poses[..1], case_dir).unwrap();
-    case.poses[..kept]
+    let truth = case.poses[..kept]
         .iter()
         .map(|p| p.pose.camera_to_world)
-        .collect()
+        .collect();
+    (truth, blurred)
 }
 
 /// Each pose's error against its true pose (mm, degrees), and how many are within 1 mm, and

@@ -15,18 +15,14 @@
 use super::options::BuildOptions;
 use super::registration::{consensus_texture, registration_light, RegistrationView};
 use super::scene::BuildScene;
-use crate::image::Frame;
 use crate::model::blur_check::{BlurCheck, FrameSharpness};
-use crate::registration::blur::sharpness_against;
+use crate::registration::blur::sharpness_at_pose;
 use crate::registration::photometric::{PhotometricModel, RayGrid};
 use crate::registration::RegistrationOptions;
 use crate::shading::calibrated::CalibratedModel;
 use crate::workflow::progress::Progress;
 use crate::Result;
 use rayon::prelude::*;
-
-/// A frame's status when it is far less sharp than the model predicts it.
-pub(super) const BLURRED: &str = "blurred";
 
 /// Fewest frames whose median sharpness against the model is a reference for blur.
 const MIN_FRAMES_FOR_BLUR: usize = 8;
@@ -124,29 +120,14 @@ fn relative_sharpness(
     let model = PhotometricModel::new(view.model_parts(scene, light, Some(&texture)))?;
     let grid = RayGrid::new(&view.camera, 0, 1);
     let ro = RegistrationOptions::default();
-    let (w, h) = (view.camera.width as usize, view.camera.height as usize);
     let progress = Progress::new("sharpness", scene.frame_count() as u64, opts.quiet);
     let ratios: Vec<Option<f64>> = (0..scene.frame_count())
         .into_par_iter()
         .map(|i| {
-            let seen = model.view(&grid, &scene.poses[i], ro.min_gamma);
-            let mut predicted = Frame::new(w as u32, h as u32);
-            let mut use_px = vec![false; w * h];
-            for p in &seen.points {
-                let k = p.ray as usize;
-                for c in 0..3 {
-                    predicted.rgb[3 * k + c] = (p.radiance[c] + seen.offset[c]) as f32;
-                }
-                use_px[k] = true;
-            }
             let frame = &view.frames[in_view[i]];
-            for (k, ok) in use_px.iter_mut().enumerate() {
-                *ok &= ro.comparable(&frame.rgb[3 * k..3 * k + 3])
-                    && view.mask.as_ref().is_none_or(|m| m[k]);
-            }
-            let use_px = erode(&erode(&use_px, w, h), w, h);
+            let mask = view.mask.as_deref();
             progress.inc();
-            sharpness_against(frame, &predicted, &use_px, w * h / 20)
+            sharpness_at_pose(&model, &grid, &scene.poses[i], frame, mask, &ro)
         })
         .collect();
     progress.finish();
@@ -157,16 +138,4 @@ fn relative_sharpness(
         .into_iter()
         .map(|r| r.filter(|_| median > 0.0).map(|r| r / median))
         .collect())
-}
-
-/// `keep` without the pixels next to one it does not keep (3x3).
-fn erode(keep: &[bool], w: usize, h: usize) -> Vec<bool> {
-    (0..w * h)
-        .map(|i| {
-            let (x, y) = (i % w, i / w);
-            keep[i]
-                && (y.saturating_sub(1)..(y + 2).min(h))
-                    .all(|yy| (x.saturating_sub(1)..(x + 2).min(w)).all(|xx| keep[yy * w + xx]))
-        })
-        .collect()
 }

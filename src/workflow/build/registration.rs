@@ -31,7 +31,7 @@
 //! video's) are left out of the model, never silently kept: [`PoseRegistration`] says which and
 //! why, and model.json counts them.
 
-use super::blur_check::{blurred_in, judge_sharpness, BLURRED};
+use super::blur_check::{blurred_in, judge_sharpness};
 use super::cross_validation::cross_validate;
 use super::error::BuildError;
 use super::fit_pass::{fit_pass, LightSamples};
@@ -184,7 +184,7 @@ pub fn register_poses(
             false => tracked.clone(),
         };
         for &i in &found {
-            statuses[i] = (BLURRED.to_string(), true);
+            statuses[i] = (FrameStatus::Blurred.name().to_string(), true);
         }
         on.retain(|i| !found.contains(i));
         blurred = found;
@@ -210,7 +210,7 @@ pub fn register_poses(
         // The tracked poses are kept: so are the tracker's verdicts on them.
         statuses = tracked;
         for &i in &blurred {
-            statuses[i] = (BLURRED.to_string(), true);
+            statuses[i] = (FrameStatus::Blurred.name().to_string(), true);
         }
     }
     if first {
@@ -226,7 +226,8 @@ pub fn register_poses(
             let d = delta_between(&given[i], &scene.poses[i]);
             // Neither a frame that shows nothing nor a blurred one is used, whatever poses
             // are kept.
-            let unusable = status == FrameStatus::Blank.name() || status == BLURRED;
+            let unusable =
+                status == FrameStatus::Blank.name() || status == FrameStatus::Blurred.name();
             FramePoseResult {
                 frame: scene.frame_numbers[i],
                 correction_mm: d.mm(),
@@ -272,7 +273,10 @@ pub fn register_poses(
                 .filter(|r| !r.used && r.status == status)
                 .count()
         };
-        let (blank, blurred) = (with(FrameStatus::Blank.name()), with(BLURRED));
+        let (blank, blurred) = (
+            with(FrameStatus::Blank.name()),
+            with(FrameStatus::Blurred.name()),
+        );
         let untrusted = left_out - blank - blurred;
         let why: Vec<String> = [
             (blank, "show next to nothing (dark or saturated)"),
