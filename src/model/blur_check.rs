@@ -24,10 +24,3 @@ pub struct BlurCheck {
     /// The frames judged, in video order.
     pub frames: Vec<FrameSharpness>,
 }
-
-impl BlurCheck {
-    /// How many frames were judged blurred.
-    pub fn blurred_count(&self) -> usize {
-        self.frames.iter().filter(|f| f.blurred).count()
-    }
-}

@@ -17,7 +17,8 @@ pub struct FramePoseResult {
     pub correction_deg: f64,
     /// How its last round ended (`converged`, `not_converged`, `outlier`, ...), or why it
     /// was not registered or not used: `blank` (it shows next to nothing), `blurred` (far less
-    /// sharp than the model predicts it; its pose is the first rounds'), `track_lost`.
+    /// sharp than the model predicts it; its pose is the first rounds', or between its
+    /// neighbours' when the tracker found it), `track_lost`.
     pub status: String,
     /// The model was built with this frame (flagged frames are left out).
     pub used: bool,

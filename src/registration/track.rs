@@ -73,7 +73,7 @@ pub struct TrackOptions {
     /// frames' median is not accepted but flagged `blurred`: it does not count towards the
     /// loss, and the frame after it is tried as after a gap (0: never). Registered and fused
     /// into the texture the next frames are tracked against, blurred frames led the demo's
-    /// video with a fifth of its frames motion-blurred 11-45 deg off in its last frames
+    /// video with a fifth of its frames motion-blurred 6-45 deg off in its last frames
     /// (BENCHMARKS.md, session 36).
     pub blurred_below: f64,
     /// Accepted frames whose sharpness makes that median (at least 4 are needed to judge).

@@ -273,8 +273,9 @@ pub struct BuildArgs {
     #[arg(long, default_value_t = build_defaults().selection.max_frames)]
     pub max_frames: usize,
     /// Keep the frames far less sharp than the model predicts them from their poses (motion
-    /// blur, defocus); by default they are left out (model.json `blur_check`, or
-    /// `registration.blur_check`, lists every frame's sharpness).
+    /// blur, defocus); by default they are left out, and with `--poses first` not tracked
+    /// against (model.json `blur_check`, or `registration.blur_check`, lists every frame's
+    /// sharpness).
     #[arg(long)]
     pub keep_blurred: bool,
     /// Replace an existing model folder.

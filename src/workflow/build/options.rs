@@ -139,7 +139,8 @@ pub struct BuildOptions {
     /// from 6 mm / 7 deg, 9 runs to settle; BENCHMARKS.md, session 27).
     pub registration_consensus_passes: usize,
     /// Frames far less sharp than the model predicts them from their poses (motion blur,
-    /// defocus) are left out of the model (`super::blur_check`; `--keep-blurred` keeps them).
+    /// defocus) are left out of the model (`super::blur_check`), and the tracker does not
+    /// accept them (`TrackOptions::blurred_below`; `--keep-blurred` keeps them).
     pub leave_out_blurred: bool,
     /// Tracking from the first pose (`--poses first`).
     pub tracking: super::tracking::TrackingOptions,

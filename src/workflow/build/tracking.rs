@@ -326,6 +326,13 @@ fn track_from(
     let mask = view.mask.as_deref();
     let mut next = state.next_untracked();
     let mut last_model: Option<(CalibratedModel, MipTexture)> = None;
+    let track_opts = TrackOptions {
+        blurred_below: match opts.leave_out_blurred {
+            true => t.track.blurred_below,
+            false => 0.0,
+        },
+        ..t.track.clone()
+    };
     while next < n && !(stop_when_lost && state.first_lost.is_some()) {
         let fit_on: Vec<usize> = {
             let ok = state.accepted_before(next);
@@ -341,7 +348,7 @@ fn track_from(
         }
         let parts = view.model_parts(scene, &light, Some(&texture));
         let seen: Vec<_> = fit_on.iter().map(|&i| state.poses[i]).collect();
-        let tracker = Tracker::new(parts, &seen, &t.track)?;
+        let tracker = Tracker::new(parts, &seen, &track_opts)?;
         let fitted_at = next;
         while next < n && next - fitted_at < t.refit_every.max(1) {
             let attempt = tracker.try_frame(&view.frames, mask, state, next)?;
