@@ -198,7 +198,7 @@ fn blurred_frames_are_flagged_and_not_tracked_against() {
     // A quarter of the frames motion-blurred, the demo's pace, 128x128, the first 30 frames.
     // Registered and fused into the texture the next frames are tracked against, blurred
     // frames lead the track astray (the demo's video with a fifth blurred: its last frames
-    // 11-45 deg off).
+    // 6-45 deg off).
     let tmp = tempfile::tempdir().unwrap();
     let case_dir = tmp.path().join("case");
     let opts = PhantomOptions {
