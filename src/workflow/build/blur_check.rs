@@ -47,8 +47,14 @@ pub(super) fn leave_out_blurred(
         return Ok(None);
     }
     let view = RegistrationView::new(scene, opts.quiet)?;
-    let mut light_warnings = Vec::new();
-    let light = registration_light(scene, opts, &mut light_warnings)?;
+    // Without a light at the given poses the frames are used unjudged: the build fits its own
+    // light next and says there when it cannot.
+    let Ok(light) = registration_light(scene, opts, &mut Vec::new()) else {
+        warnings.push(
+            "no light could be fitted at the given poses to check the frames for blur: every frame is used".to_string(),
+        );
+        return Ok(None);
+    };
     let all: Vec<usize> = (0..scene.frame_count()).collect();
     let check = judge_sharpness(scene, &view, &all, &light, opts)?;
     let blurred = blurred_in(&check, &all);
