@@ -31,6 +31,7 @@ use bronchosim::shading::ShadingKind;
 use bronchosim::texture::synthesis::{SynthesisOptions, UnseenMode};
 use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
 use bronchosim::workflow::register::register_command;
+use bronchosim::workflow::summary::build_text;
 use std::path::Path;
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -686,6 +687,13 @@ fn build_leaves_out_the_frames_blurred_against_the_model() {
     );
     assert!(m.fit_quality.iter().all(|f| !flagged.contains(&f.frame)));
     assert!(m.warnings.iter().any(|w| w.contains("less sharp")));
+    let said = format!("{} of {kept} left out ({flagged:?})", flagged.len());
+    let summary = build_text(&dir.join("fixed"), &m);
+    assert!(summary.contains(&said), "{summary}");
+    let html = std::fs::read_to_string(dir.join("fixed/report.html")).unwrap();
+    assert!(
+        html.contains("<h2>Blurred frames</h2>") && html.contains(&format!("frames {flagged:?}"))
+    );
 }
 
 #[test]

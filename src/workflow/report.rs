@@ -5,6 +5,7 @@
 
 use crate::image::Frame;
 use crate::io::png::write_png_srgb8;
+use crate::model::blur_check::BlurCheck;
 use crate::model::registration::PoseRegistration;
 use crate::model::ModelManifest;
 use crate::raycast::{GBuffer, RayTable};
@@ -335,6 +336,57 @@ fn frame_figures(html: &mut String, inputs: &ReportInputs, tmp: &Path) -> Result
 }
 
 /// The registration's corrections over the video and its rounds (issue 16).
+/// Every judged frame's sharpness against the model's prediction from its pose, and the frames
+/// left out as blurred (`at_given_poses`: the poses were trusted as given; else the
+/// registration judged them after its first rounds).
+fn blur_check_section(html: &mut String, check: &BlurCheck, at_given_poses: bool) {
+    let blurred: Vec<usize> = check
+        .frames
+        .iter()
+        .filter(|f| f.blurred)
+        .map(|f| f.frame)
+        .collect();
+    let _ = write!(
+        html,
+        "<h2>Blurred frames</h2><p>Each frame's sharpness against the model's prediction from its \
+         pose ({}), over the video's median. {} of {} frames under {:.2} were left out as \
+         blurred{}.</p>",
+        match at_given_poses {
+            true => "the poses as given",
+            false => "the registration's poses after its first rounds",
+        },
+        blurred.len(),
+        check.frames.len(),
+        check.blurred_below,
+        match blurred.is_empty() {
+            true => String::new(),
+            false => format!(": frames {blurred:?}"),
+        }
+    );
+    let values: Vec<f64> = check
+        .frames
+        .iter()
+        .map(|f| f.relative_sharpness.unwrap_or(1.0))
+        .collect();
+    let unjudged = check
+        .frames
+        .iter()
+        .filter(|f| f.relative_sharpness.is_none())
+        .count();
+    if unjudged > 0 {
+        let _ = write!(
+            html,
+            "<p>{unjudged} frames showed too little to judge (drawn at 1).</p>"
+        );
+    }
+    let line = vec![check.blurred_below; values.len()];
+    html.push_str(&svg_series(
+        "sharpness against the prediction, over the median",
+        &[("frame", "#36c", values), ("left out below", "#c33", line)],
+        (0.0, 2.0),
+    ));
+}
+
 fn registration_section(html: &mut String, reg: &PoseRegistration) {
     html.push_str(&format!(
         "<h2>Registration of the poses to the CT</h2><p>{}; {} of {} frames left out \
@@ -422,6 +474,11 @@ pub fn write_report(path: &Path, inputs: &ReportInputs) -> Result<()> {
     }
     if let Some(reg) = &m.registration {
         registration_section(&mut html, reg);
+    }
+    let blur_check = m.blur_check.as_ref();
+    if let Some(check) = blur_check.or(m.registration.as_ref().and_then(|r| r.blur_check.as_ref()))
+    {
+        blur_check_section(&mut html, check, blur_check.is_some());
     }
     if let Some(t) = &m.pose_truth {
         html.push_str(&pose_truth_html(t));

@@ -71,6 +71,23 @@ pub fn build_text(out: &Path, m: &ModelManifest) -> String {
     if let Some(reg) = &m.registration {
         text.push_str(&registration_line(reg));
     }
+    if let Some(check) = &m.blur_check {
+        let blurred: Vec<usize> = check
+            .frames
+            .iter()
+            .filter(|f| f.blurred)
+            .map(|f| f.frame)
+            .collect();
+        text.push_str(&format!(
+            "  blurred frames at the given poses: {} of {} left out{}\n",
+            blurred.len(),
+            check.frames.len(),
+            match blurred.is_empty() {
+                true => String::new(),
+                false => format!(" ({blurred:?})"),
+            }
+        ));
+    }
     if let Some(t) = &m.pose_truth {
         text.push_str(&pose_truth_line(t));
     }
