@@ -654,12 +654,7 @@ fn build_leaves_out_the_frames_blurred_against_the_model() {
     let m = build_model(&case_dir, &dir.join("fixed"), &opts).unwrap();
     assert!(m.registration.is_none());
     let check = m.blur_check.as_ref().expect("model.json records the check");
-    let flagged: Vec<usize> = check
-        .frames
-        .iter()
-        .filter(|f| f.blurred)
-        .map(|f| f.frame)
-        .collect();
+    let flagged = check.blurred_frames();
     let sharpest_blurred = check
         .frames
         .iter()

@@ -24,3 +24,14 @@ pub struct BlurCheck {
     /// The frames judged, in video order.
     pub frames: Vec<FrameSharpness>,
 }
+
+impl BlurCheck {
+    /// The frames (indices in the case's poses.json) left out as blurred.
+    pub fn blurred_frames(&self) -> Vec<usize> {
+        self.frames
+            .iter()
+            .filter(|f| f.blurred)
+            .map(|f| f.frame)
+            .collect()
+    }
+}

@@ -340,12 +340,7 @@ fn frame_figures(html: &mut String, inputs: &ReportInputs, tmp: &Path) -> Result
 /// left out as blurred (`at_given_poses`: the poses were trusted as given; else the
 /// registration judged them after its first rounds).
 fn blur_check_section(html: &mut String, check: &BlurCheck, at_given_poses: bool) {
-    let blurred: Vec<usize> = check
-        .frames
-        .iter()
-        .filter(|f| f.blurred)
-        .map(|f| f.frame)
-        .collect();
+    let blurred = check.blurred_frames();
     let _ = write!(
         html,
         "<h2>Blurred frames</h2><p>Each frame's sharpness against the model's prediction from its \

@@ -72,12 +72,7 @@ pub fn build_text(out: &Path, m: &ModelManifest) -> String {
         text.push_str(&registration_line(reg));
     }
     if let Some(check) = &m.blur_check {
-        let blurred: Vec<usize> = check
-            .frames
-            .iter()
-            .filter(|f| f.blurred)
-            .map(|f| f.frame)
-            .collect();
+        let blurred = check.blurred_frames();
         text.push_str(&format!(
             "  blurred frames at the given poses: {} of {} left out{}\n",
             blurred.len(),
