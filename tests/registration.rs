@@ -34,6 +34,10 @@ use bronchosim::workflow::register::register_command;
 use bronchosim::workflow::summary::build_text;
 use std::path::Path;
 
+#[path = "common/untracked.rs"]
+mod untracked;
+use untracked::phantom_cut_to;
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -588,20 +592,7 @@ fn build_leaves_out_the_frames_blurred_against_the_model() {
         ..Default::default()
     };
     let kept = 30;
-    let blurred: Vec<usize> = write_phantom_case(&case_dir, &opts)
-        .unwrap()
-        .blurred_frames
-        .into_iter()
-        .filter(|&f| f < kept)
-        .collect();
-    let case = Case::open(&case_dir).unwrap();
-    for e in &case.poses[kept..] {
-        let FrameRef::Image(p) = &e.frame else {
-            panic!("the phantom writes PNG frames")
-        };
-        std::fs::remove_file(p).unwrap();
-    }
-    write_poses(&case_dir.join("poses.json"), &case.poses[..kept], &case_dir).unwrap();
+    let (case, blurred) = phantom_cut_to(&case_dir, &opts, kept);
     let m = build_refined(&case_dir, &dir.join("model"), None);
     let reg = m.registration.as_ref().unwrap();
     let flagged: Vec<usize> = reg

@@ -56,6 +56,16 @@ pub fn untracked_phantom_of(
     opts: &PhantomOptions,
     kept: usize,
 ) -> (Vec<Affine>, Vec<usize>) {
+    let (case, blurred) = phantom_cut_to(case_dir, opts, kept);
+    write_poses(&case_dir.join("poses.json"), &case.poses[..1], case_dir).unwrap();
+    let truth = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
+    (truth, blurred)
+}
+
+/// The phantom of `opts` written into `case_dir`, cut to its first `kept` frames (the other
+/// frames' files removed, poses.json holding the kept frames' poses as the phantom gave them);
+/// the case opened, and the frames among the kept the phantom motion-blurred.
+pub fn phantom_cut_to(case_dir: &Path, opts: &PhantomOptions, kept: usize) -> (Case, Vec<usize>) {
     let blurred = write_phantom_case(case_dir, opts)
         .unwrap()
         .blurred_frames
@@ -69,12 +79,8 @@ pub fn untracked_phantom_of(
         };
         std::fs::remove_file(p).unwrap();
     }
-    write_poses(&case_dir.join("poses.json"), &case.poses[..1], case_dir).unwrap();
-    let truth = case.poses[..kept]
-        .iter()
-        .map(|p| p.pose.camera_to_world)
-        .collect();
-    (truth, blurred)
+    write_poses(&case_dir.join("poses.json"), &case.poses[..kept], case_dir).unwrap();
+    (Case::open(case_dir).unwrap(), blurred)
 }
 
 /// Each pose's error against its true pose (mm, degrees), and how many are within 1 mm, and
