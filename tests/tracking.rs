@@ -226,10 +226,10 @@ fn blurred_frames_are_flagged_and_not_tracked_against() {
         .map(|f| errors[f])
         .collect();
     println!(
-        "blurred {blurred:?}, flagged {flagged:?}; lost at {:?}; {within} of 30 within 1 mm and 1 deg; sharp frames {sharp:?}; light fits {}",
-        t.first_lost, t.light_fits
+        "blurred {blurred:?}, flagged {flagged:?}; lost at {:?}; {within} of 30 within 1 mm and 1 deg; sharp frames {sharp:?}",
+        t.first_lost
     );
-    // Measured: all five flagged. Tracking alone (no rounds) here, 16 of 30 frames within 1 mm
+    // Measured: all five flagged. Tracking alone (no rounds) here, 15 of 30 frames within 1 mm
     // and 1 deg, and 20 with the check off (the rounds of a build refine them; the demo's
     // video with a fifth of its frames blurred builds to 30.76 dB with the check, 29.85
     // without). A frame is judged against the recent accepted frames' median: from the fifth
@@ -245,10 +245,6 @@ fn blurred_frames_are_flagged_and_not_tracked_against() {
     );
     assert!(flagged.iter().all(|&f| !s.registration.frames[f].used));
     assert_eq!(t.first_lost, None);
-    // Fitted at frame 1, 9 and 17 on schedule, and again for frames 24 and 29, judged at 0.5-0.7
-    // of the median against a model fitted 7 and 5 frames back. Frames 8, 13 and 28, under half
-    // the median, are not judged again: with a refit for every flagged frame, 6 fits.
-    assert!(t.light_fits <= 5, "{} fits of the light", t.light_fits);
 }
 
 #[test]

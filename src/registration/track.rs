@@ -78,15 +78,6 @@ pub struct TrackOptions {
     pub blurred_below: f64,
     /// Accepted frames whose sharpness makes that median (at least 4 are needed to judge).
     pub sharpness_window: usize,
-    /// A frame under this share of that median is blurred whatever model judged it; one
-    /// between it and `blurred_below` is judged again against a model fitted on the frames up
-    /// to it ([`FrameTry::worth_retrying`]), which costs a fit of the light. Against the
-    /// tracker's model, fitted on 8 frames, a sharp frame's sharpness follows where that model
-    /// saw its walls from: on the demo phantom's sharp video the frames flagged against a model
-    /// fitted 1-7 frames back scored 0.56-0.68 of the median, and 0.70-1.22 against the next;
-    /// the 16 motion-blurred frames of that video with a fifth of them blurred scored
-    /// 0.23-0.51, 15 of them under 0.44 (BENCHMARKS.md, session 37).
-    pub surely_blurred_below: f64,
 }
 
 impl Default for TrackOptions {
@@ -104,7 +95,6 @@ impl Default for TrackOptions {
             relocalise_deg: 10.0,
             blurred_below: 0.7,
             sharpness_window: 9,
-            surely_blurred_below: 0.5,
         }
     }
 }
@@ -388,7 +378,6 @@ impl<'a> Tracker<'a> {
                 gain,
                 cost: f64::NAN,
                 sharpness: None,
-                worth_retrying: false,
             });
         }
         let frame = self.prepare(&frames[f]);
@@ -469,7 +458,6 @@ impl<'a> Tracker<'a> {
                     gain,
                     cost: best.cost_after,
                     sharpness,
-                    worth_retrying: s >= o.surely_blurred_below * m,
                 });
             }
         }
@@ -492,7 +480,6 @@ impl<'a> Tracker<'a> {
             },
             cost: best.cost_after,
             sharpness,
-            worth_retrying: !accepted,
         })
     }
 }
@@ -526,9 +513,6 @@ pub struct FrameTry {
     pub cost: f64,
     /// Its sharpness against the model's prediction from its refined pose, when judged.
     pub sharpness: Option<f64>,
-    /// Not accepted, and may be against a model fitted on the frames up to it: not for a
-    /// blank frame, nor for one surely blurred ([`TrackOptions::surely_blurred_below`]).
-    pub worth_retrying: bool,
 }
 
 impl TrackState {
@@ -578,7 +562,6 @@ mod tests {
             gain: 1.0,
             cost: 1.0,
             sharpness: None,
-            worth_retrying: !accepted && !blank,
         };
         state.commit(1, &try_at(along(2.0), true, false), 3);
         for f in 2..6 {

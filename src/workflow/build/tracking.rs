@@ -353,10 +353,9 @@ fn track_from(
         while next < n && next - fitted_at < t.refit_every.max(1) {
             let attempt = tracker.try_frame(&view.frames, mask, state, next)?;
             // A frame the model no longer predicts is tried again against a model fitted on
-            // the frames up to it (new surface comes into view as the scope moves); a blank
-            // or surely blurred one is what it is against any model.
+            // the frames up to it (new surface comes into view as the scope moves).
             let newer = state.accepted_before(next).last() > fit_on.last();
-            if attempt.worth_retrying && newer {
+            if !attempt.accepted && newer {
                 break;
             }
             state.commit(next, &attempt, t.track.lost_after);
