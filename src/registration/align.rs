@@ -66,7 +66,7 @@ pub struct Linearised {
 
 /// Huber cost and IRLS weight of a normalised residual.
 #[inline]
-fn huber(e: f64, k: f64) -> (f64, f64) {
+pub(crate) fn huber(e: f64, k: f64) -> (f64, f64) {
     let a = e.abs();
     if a <= k {
         (0.5 * e * e, 1.0)
@@ -311,6 +311,84 @@ impl LevelProblem<'_> {
             (out.h, out.b) = normal.finish();
         }
         out
+    }
+}
+
+/// One point's residual in one channel with the parts of its Jacobian that scale with the
+/// point's albedo kept apart, so that the albedo can be a shared unknown of many frames
+/// ([`super::joint`]). All are divided by the residual's sigma. With albedo `a` the residual
+/// is `obs - a per_albedo - fixed` and its Jacobian over the pose step and log k is
+/// `image - a shade - specular`, then `-(a per_albedo + fixed)`.
+#[derive(Clone, Copy, Debug)]
+pub struct PointRow {
+    /// Index of the point in [`LevelProblem::points`].
+    pub point: u32,
+    /// Colour channel.
+    pub channel: u8,
+    /// The frame's value.
+    pub obs: f32,
+    /// The prediction per unit albedo (`k S_c`).
+    pub per_albedo: f32,
+    /// The prediction that does not scale with the albedo (`k (P_c + a_c)`).
+    pub fixed: f32,
+    /// Derivative through the frame's image gradient.
+    pub image: [f32; 6],
+    /// Derivative of `k S_c` (the light's part per unit albedo).
+    pub shade: [f32; 6],
+    /// Derivative of `k P_c`.
+    pub specular: [f32; 6],
+}
+
+impl LevelProblem<'_> {
+    /// The residual rows of the points usable where they were rendered, projected from `pose`
+    /// with gain factor `exp(log_k)`: the pieces [`LevelProblem::evaluate`] sums, per point
+    /// and channel of non-zero weight.
+    pub fn point_rows(&self, pose: &Affine, log_k: f64) -> Vec<PointRow> {
+        let cam = &self.image.camera;
+        let (r, c) = (rotation_of(pose).transpose(), camera_centre(pose).coords);
+        let k = log_k.exp();
+        let pinhole = cam.is_pinhole();
+        let mut rows = Vec::with_capacity(3 * self.points.len());
+        for (i, (q, inv_sigma)) in self.points.iter().zip(&self.inv_sigma).enumerate() {
+            if self.ref_cost.get(i).is_some_and(|c| c.is_nan()) {
+                continue;
+            }
+            let p = r * (q.x - c);
+            let Some((obs, gx, gy)) = self.observe(&p) else {
+                continue;
+            };
+            let n = r * q.n;
+            let sg = self.light.shade_grad(&p, &n);
+            let dpix = projection_jacobian(cam, &p, pinhole);
+            for ch in 0..3 {
+                let ws = inv_sigma[ch] as f64;
+                if ws == 0.0 {
+                    continue;
+                }
+                let gq = dpix.0 * gx[ch] as f64 + dpix.1 * gy[ch] as f64;
+                let gw = gq.cross(&p);
+                let mut row = PointRow {
+                    point: i as u32,
+                    channel: ch as u8,
+                    obs: (obs[ch] as f64 * ws) as f32,
+                    per_albedo: (k * sg.value[ch] * ws) as f32,
+                    fixed: (k * (sg.specular[ch] + self.offset[ch]) * ws) as f32,
+                    image: [0.0; 6],
+                    shade: [0.0; 6],
+                    specular: [0.0; 6],
+                };
+                for a in 0..3 {
+                    row.image[a] = (-gq[a] * ws) as f32;
+                    row.image[3 + a] = (gw[a] * ws) as f32;
+                }
+                for a in 0..6 {
+                    row.shade[a] = (k * sg.grad[ch][a] * ws) as f32;
+                    row.specular[a] = (k * sg.specular_grad[ch][a] * ws) as f32;
+                }
+                rows.push(row);
+            }
+        }
+        rows
     }
 }
 

@@ -269,7 +269,7 @@ impl<'a> FrameRegistrar<'a> {
     }
 
     /// The image pyramid of `obs` down to the coarsest level used.
-    fn pyramid(&self, obs: &FrameObs) -> Result<ObservedPyramid> {
+    pub(crate) fn pyramid(&self, obs: &FrameObs) -> Result<ObservedPyramid> {
         ObservedPyramid::new(
             obs.frame,
             self.model.parts.camera,

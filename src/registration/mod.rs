@@ -15,6 +15,7 @@ pub mod blur;
 pub mod chroma;
 pub mod consensus;
 pub mod frame;
+pub mod joint;
 pub mod level;
 pub mod light;
 pub mod photometric;
