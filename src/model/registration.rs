@@ -53,6 +53,10 @@ pub struct PoseRegistration {
     pub frames: Vec<FramePoseResult>,
     /// The rounds run.
     pub rounds: Vec<RoundSummary>,
+    /// The stage after the rounds that refines every frame they kept at once, the albedo
+    /// eliminated (`registration::joint`); `None` when it did not run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint: Option<RoundSummary>,
     /// Frames left out of the model.
     pub left_out: usize,
     /// The poses the model was built with: `refined`, or `given` unless the refined poses
@@ -103,12 +107,17 @@ pub struct PoseRegistration {
 }
 
 impl PoseRegistration {
-    /// How many rounds ran, and how many of them were discarded: "9 rounds (1 discarded)".
+    /// How many rounds ran, how many of them were discarded, and whether all frames were
+    /// refined at once after them: "9 rounds (1 discarded) and all frames at once".
     pub fn rounds_text(&self) -> String {
         let discarded = self.rounds.iter().filter(|r| r.discarded).count();
-        match discarded {
+        let rounds = match discarded {
             0 => format!("{} rounds", self.rounds.len()),
             d => format!("{} rounds ({d} discarded)", self.rounds.len()),
+        };
+        match self.joint {
+            Some(_) => format!("{rounds} and all frames at once"),
+            None => rounds,
         }
     }
 

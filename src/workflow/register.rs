@@ -121,12 +121,18 @@ pub fn registration_report(
         html.push_str(&overlays_html(&reg.overlays));
     }
     html.push_str("<h2>Rounds</h2><table><tr><th>round</th><th>against</th><th>median step (mm)</th><th>median step (deg)</th><th>statuses</th><th>frames realigned</th><th>s</th></tr>");
-    for (i, r) in reg.rounds.iter().enumerate() {
+    let numbered = reg
+        .rounds
+        .iter()
+        .enumerate()
+        .map(|(i, r)| ((i + 1).to_string(), r));
+    let joint = reg.joint.iter().map(|r| ("after".to_string(), r));
+    for (i, r) in numbered.chain(joint) {
         let counts: Vec<String> = r.counts.iter().map(|(k, v)| format!("{k} {v}")).collect();
         let _ = write!(
             html,
             "<tr><td>{}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{}</td><td>{}</td><td>{:.1}</td></tr>",
-            i + 1,
+            i,
             if r.discarded {
                 format!("{} (discarded)", r.against)
             } else {

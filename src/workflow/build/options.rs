@@ -90,6 +90,11 @@ pub struct BuildOptions {
     /// texture's albedo seen from their poses, which helps only once the texture rounds have
     /// made the poses consistent (demo phantom, 1.5 mm / 2 deg: BENCHMARKS.md, session 19).
     pub registration_shading_from: usize,
+    /// After the rounds, every frame they did not flag is refined once more with all the
+    /// others at once, the albedo eliminated ([`crate::registration::joint`]): the rounds
+    /// leave an error that neighbouring frames share and the texture fused from them follows,
+    /// which a frame registered on its own against that texture cannot see.
+    pub registration_joint: bool,
     /// A geometry round is run again (within `registration_rounds`) while more than this share
     /// of its frames are outliers, their corrections departing from their neighbours': the
     /// texture fused after it would follow their errors (1 or more: never).
@@ -232,6 +237,7 @@ impl Default for BuildOptions {
             registration_rounds: 9,
             registration_geometry_every: 3,
             registration_shading_from: 6,
+            registration_joint: true,
             // From tracker poses 3 mm / 4 deg off, the demo phantom's first geometry round
             // leaves 37 of 80 frames outliers, a second one 8; from 1.5 mm / 2 deg 10, and a
             // second round there was no better (BENCHMARKS.md, issue 16, session 12). A real

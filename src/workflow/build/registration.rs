@@ -49,8 +49,13 @@ use crate::math::Affine;
 use crate::model::registration::{FramePoseResult, PoseOverlay, PoseRegistration, RoundSummary};
 use crate::model::selection::FrameSelection;
 use crate::registration::{
-    blocks::BlockOptions, consensus::consensus_poses, delta_between, interpolate_flagged,
-    register_round, FrameRegistration, FrameStatus, ModelParts, RegistrationOptions, RoundKind,
+    blocks::BlockOptions,
+    consensus::consensus_poses,
+    delta_between, interpolate_flagged,
+    joint::{refine_jointly, JointOptions, JointRole},
+    register_round,
+    rounds::levels_below_reference,
+    FrameRegistrar, FrameRegistration, FrameStatus, ModelParts, RegistrationOptions, RoundKind,
     RoundOptions, TrackState, VideoOptions, VideoRegistration,
 };
 use crate::render::{MipOptions, MipTexture};
@@ -191,6 +196,7 @@ pub fn register_poses(
     };
     let RoundsRun {
         rounds,
+        joint,
         given_score,
         lambert_lamp,
         consensus_start,
@@ -302,6 +308,7 @@ pub fn register_poses(
     Ok(Some(PoseRegistration {
         frames: results,
         rounds,
+        joint,
         left_out,
         kept: if kept_given { "given" } else { "refined" }.to_string(),
         held_out_psnr_given_db: given_score,
@@ -458,6 +465,8 @@ impl RegistrationView {
 pub(super) struct RoundsRun {
     /// The rounds, discarded ones included.
     pub(super) rounds: Vec<RoundSummary>,
+    /// The joint stage after them ([`joint_stage`]).
+    joint: Option<RoundSummary>,
     /// The held-out PSNR at the poses the rounds started from.
     given_score: Option<f64>,
     /// The first round was run again against the Lambertian lamp.
@@ -610,8 +619,15 @@ fn run_rounds(
             r + 1
         };
     }
+    let joint = match (last_light.as_ref(), rounds.iter().any(|r| !r.discarded)) {
+        (Some(light), true) if opts.registration_joint => {
+            joint_stage(scene, view, light, opts, statuses)?
+        }
+        _ => None,
+    };
     Ok(RoundsRun {
         rounds,
+        joint,
         given_score,
         lambert_lamp,
         consensus_start,
@@ -629,6 +645,118 @@ fn run_rounds(
 const LATER_TEXTURE_COARSEST_LEVEL: usize = 1;
 /// The round from which texture rounds start at `LATER_TEXTURE_COARSEST_LEVEL`.
 const LATER_TEXTURE_FROM_ROUND: usize = 2;
+
+/// The pyramid levels of the joint stage at the reference frame size (counted as the rounds'
+/// are, [`levels_below_reference`]): level 1 gathers the move, level 0 places it (demo phantom,
+/// the rounds' poses from a 1.5 mm / 2 deg tracker: new views 31.06 -> 32.94 dB; level 0 alone
+/// or levels 2, 1, 0 no better; BENCHMARKS.md, session 38).
+const JOINT_LEVELS: [usize; 2] = [1, 0];
+
+/// Most frames the joint stage refines in one solve. Its normal equations are dense, seven
+/// unknowns a frame (200 frames: 1400 x 1400, 16 MB, and a cell seen by k frames adds k^2
+/// blocks): a longer video (`--max-frames` above the default) is refined in consecutive
+/// windows of this many, each with the `JOINT_WINDOW_ANCHORS` frames refined just before it
+/// held where they are.
+const JOINT_WINDOW: usize = 200;
+const JOINT_WINDOW_ANCHORS: usize = 20;
+
+/// The joint stage after the rounds ([`BuildOptions::registration_joint`]): the frames not
+/// flagged in `statuses` refined together against the geometry in `light`, the albedo
+/// eliminated; the frame a video without a tracker starts from stays where it is. `None`
+/// when fewer than two frames are left to refine.
+fn joint_stage(
+    scene: &mut BuildScene,
+    view: &RegistrationView,
+    light: &CalibratedModel,
+    opts: &BuildOptions,
+    statuses: &[(String, bool)],
+) -> Result<Option<RoundSummary>> {
+    let started = Instant::now();
+    let n = scene.frame_count();
+    let anchored = anchored_frames(scene, opts);
+    let roles: Vec<JointRole> = (0..n)
+        .map(|i| match statuses.get(i) {
+            Some((_, true)) => JointRole::Skipped,
+            _ if anchored.contains(&i) => JointRole::Anchor,
+            _ => JointRole::Refined,
+        })
+        .collect();
+    if roles.iter().filter(|&&r| r == JointRole::Refined).count() < 2 {
+        return Ok(None);
+    }
+    let below = levels_below_reference(&view.camera);
+    let mut levels: Vec<usize> = JOINT_LEVELS
+        .iter()
+        .map(|l| l.saturating_sub(below))
+        .collect();
+    levels.dedup();
+    let reg = FrameRegistrar::new(
+        view.model_parts(scene, light, None),
+        RegistrationOptions {
+            coarsest_level: levels[0],
+            finest_level: 0,
+            ..RegistrationOptions::default()
+        },
+    )?;
+    // Consecutive windows of the frames to refine, each with the frames refined just before
+    // it held as anchors.
+    let refined: Vec<usize> = (0..n).filter(|&i| roles[i] == JointRole::Refined).collect();
+    let windows: Vec<&[usize]> = refined.chunks(JOINT_WINDOW).collect();
+    let joint = JointOptions::default();
+    let progress = Progress::new(
+        "register (all frames at once)",
+        (windows.len() * levels.len() * joint.renders) as u64,
+        opts.quiet,
+    );
+    let mut poses = scene.poses.clone();
+    for (w, window) in windows.iter().enumerate() {
+        let before =
+            &refined[(w * JOINT_WINDOW).saturating_sub(JOINT_WINDOW_ANCHORS)..w * JOINT_WINDOW];
+        let window_roles: Vec<JointRole> = (0..n)
+            .map(|i| match roles[i] {
+                JointRole::Refined if window.contains(&i) => JointRole::Refined,
+                JointRole::Refined if before.contains(&i) => JointRole::Anchor,
+                JointRole::Anchor => JointRole::Anchor,
+                _ => JointRole::Skipped,
+            })
+            .collect();
+        for &level in &levels {
+            poses = refine_jointly(
+                &reg,
+                &view.frames,
+                &light.gains,
+                view.mask.as_deref(),
+                &poses,
+                &window_roles,
+                &JointOptions {
+                    level,
+                    progress: progress.bar(),
+                    ..joint.clone()
+                },
+            )?
+            .poses;
+        }
+    }
+    progress.finish();
+    let steps: Vec<_> = (0..n)
+        .filter(|&i| roles[i] == JointRole::Refined)
+        .map(|i| delta_between(&scene.poses[i], &poses[i]))
+        .collect();
+    let mut counts = std::collections::BTreeMap::new();
+    for (status, _) in statuses {
+        *counts.entry(status.clone()).or_insert(0) += 1;
+    }
+    set_poses(scene, poses, opts);
+    Ok(Some(RoundSummary {
+        against: "all frames at once".to_string(),
+        median_step_mm: median(steps.iter().map(|d| d.mm()).collect()),
+        median_step_deg: median(steps.iter().map(|d| d.deg()).collect()),
+        counts,
+        realigned: 0,
+        seconds: started.elapsed().as_secs_f64(),
+        discarded: false,
+    }))
+}
 
 /// Put the scene's frames at `poses`: the depths cached at the old ones are dropped.
 fn set_poses(scene: &mut BuildScene, poses: Vec<Affine>, opts: &BuildOptions) {

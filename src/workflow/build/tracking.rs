@@ -280,10 +280,12 @@ fn refine_tracked(
     if on.len() < opts.tracking.fit_frames.max(2) {
         return Ok(false);
     }
-    // No held-out frames: the build's rounds decide on the poses, after the tracking.
+    // No held-out frames and no joint stage: the build's rounds decide on the poses, after
+    // the tracking.
     let quiet = BuildOptions {
         quiet: true,
         cross_validate_every: 0,
+        registration_joint: false,
         ..opts.clone()
     };
     let (run, _) = rounds_on_frames(
