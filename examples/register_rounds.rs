@@ -29,9 +29,12 @@
 //! alone, each frame divided by the albedo its colour predicts (`first=chroma`, the texture fused
 //! from the given poses follows their errors), or against the texture (`first=texture`).
 
+#[path = "common/case_copy.rs"]
+mod case_copy;
+
 use bronchosim::image::Frame;
 use bronchosim::io::case::Case;
-use bronchosim::io::poses::{read_poses, write_poses, PoseEntry};
+use bronchosim::io::poses::{read_poses, PoseEntry};
 use bronchosim::math::Affine;
 use bronchosim::model::Model;
 use bronchosim::registration::chroma::ChromaAlbedo;
@@ -44,6 +47,7 @@ use bronchosim::shading::ShadingKind;
 use bronchosim::volume::filter::gaussian_blur;
 use bronchosim::volume::Volume;
 use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
+use case_copy::case_copy;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -130,42 +134,6 @@ fn write_measurements(
         })
         .collect();
     std::fs::write(path, serde_json::to_string(&rows)?)?;
-    Ok(())
-}
-
-/// A copy of the case at `to` with its own poses.json (everything else hard-linked).
-fn case_copy(from: &Path, to: &Path, poses: &[PoseEntry]) -> anyhow::Result<()> {
-    std::fs::create_dir_all(to.join("frames"))?;
-    for e in std::fs::read_dir(from)? {
-        let p = e?.path();
-        let name = p.file_name().unwrap();
-        if name == "poses.json" || name == "truth" {
-            continue;
-        }
-        if p.is_dir() {
-            for f in std::fs::read_dir(&p)? {
-                let f = f?.path();
-                std::fs::hard_link(&f, to.join(name).join(f.file_name().unwrap()))?;
-            }
-        } else {
-            std::fs::hard_link(&p, to.join(name))?;
-        }
-    }
-    let entries: Vec<PoseEntry> = poses
-        .iter()
-        .map(|p| PoseEntry {
-            frame: match &p.frame {
-                bronchosim::io::poses::FrameRef::Image(i) => {
-                    bronchosim::io::poses::FrameRef::Image(
-                        to.join(i.strip_prefix(from).unwrap_or(i)),
-                    )
-                }
-                other => other.clone(),
-            },
-            pose: p.pose,
-        })
-        .collect();
-    write_poses(&to.join("poses.json"), &entries, to)?;
     Ok(())
 }
 
