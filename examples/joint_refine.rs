@@ -11,39 +11,19 @@
 //! `start/case` and `start/model` (built with those poses, every frame, no hold-out), and
 //! `final/case` and `final/model` (built with the refined poses and scored on the truth views).
 
-#[path = "common/case_copy.rs"]
-mod case_copy;
+#[path = "common/phantom_run.rs"]
+mod phantom_run;
 
-use bronchosim::io::case::Case;
-use bronchosim::io::poses::read_poses;
 use bronchosim::math::Affine;
 use bronchosim::model::Model;
 use bronchosim::registration::joint::{refine_jointly, JointOptions, JointRole};
-use bronchosim::registration::{pose_error, FrameRegistrar, RegistrationOptions};
-use bronchosim::shading::ShadingKind;
-use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
-use case_copy::case_copy;
+use bronchosim::registration::{FrameRegistrar, RegistrationOptions};
+use bronchosim::workflow::build::build_model;
+use phantom_run::{
+    case_copy, open_phantom, registration_model_options, score, scored_model, PhantomRun,
+};
 use std::path::PathBuf;
 use std::time::Instant;
-
-fn score(est: &[Affine], truth: &[Affine]) -> String {
-    let e: Vec<(f64, f64)> = est
-        .iter()
-        .zip(truth)
-        .map(|(a, b)| pose_error(a, b))
-        .collect();
-    let mut mm: Vec<f64> = e.iter().map(|x| x.0).collect();
-    let mut deg: Vec<f64> = e.iter().map(|x| x.1).collect();
-    mm.sort_by(f64::total_cmp);
-    deg.sort_by(f64::total_cmp);
-    let within = e.iter().filter(|x| x.0 <= 1.0 && x.1 <= 1.0).count();
-    format!(
-        "median {:.3} mm {:.3} deg, within 1 mm & 1 deg {within}/{}",
-        mm[mm.len() / 2],
-        deg[deg.len() / 2],
-        e.len()
-    )
-}
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -73,35 +53,17 @@ fn main() -> anyhow::Result<()> {
             _ => anyhow::bail!("unknown argument {kv}"),
         }
     }
-    let case = Case::open(&case_dir)?;
-    let truth: Vec<Affine> = read_poses(&case_dir.join("truth/poses.json"), &case_dir)?
-        .iter()
-        .map(|p| p.pose.camera_to_world)
-        .collect();
-    let frames: Vec<_> = case.frame_source()?.collect::<Result<_, _>>()?;
-    let mut entries = case.poses.clone();
     let start = start.ok_or_else(|| anyhow::anyhow!("start=DIR is needed"))?;
-    for (e, p) in entries
-        .iter_mut()
-        .zip(read_poses(&start.join("poses.json"), &start)?)
-    {
-        e.pose.camera_to_world = p.pose.camera_to_world;
-    }
+    let PhantomRun {
+        truth,
+        frames,
+        mut entries,
+    } = open_phantom(&case_dir, Some(&start))?;
     let poses: Vec<Affine> = entries.iter().map(|p| p.pose.camera_to_world).collect();
     println!("start: {}", score(&poses, &truth));
-    let mut build_opts = BuildOptions {
-        cross_validate_every: 0,
-        shading: Some(ShadingKind::Calibrated),
-        poses: PosesMode::Fixed,
-        quiet: true,
-        force: true,
-        ..Default::default()
-    };
-    build_opts.selection.max_frames = 0;
-    for d in ["start/case", "final/case"] {
-        if work.join(d).exists() {
-            std::fs::remove_dir_all(work.join(d))?;
-        }
+    let build_opts = registration_model_options();
+    if work.join("start/case").exists() {
+        std::fs::remove_dir_all(work.join("start/case"))?;
     }
     case_copy(&case_dir, &work.join("start/case"), &entries)?;
     build_model(
@@ -143,25 +105,9 @@ fn main() -> anyhow::Result<()> {
     for (e, p) in entries.iter_mut().zip(&current) {
         e.pose.camera_to_world = *p;
     }
-    case_copy(&case_dir, &work.join("final/case"), &entries)?;
-    let final_opts = BuildOptions {
-        truth: Some(case_dir.join("truth")),
-        poses: PosesMode::Fixed,
-        quiet: true,
-        force: true,
-        ..Default::default()
-    };
-    build_model(
-        &work.join("final/case"),
-        &work.join("final/model"),
-        &final_opts,
-    )?;
-    let eval: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(
-        work.join("final/model/evaluation.json"),
-    )?)?;
     println!(
         "final model: new views {:.2} dB",
-        eval[0]["mean_psnr_db"].as_f64().unwrap_or(f64::NAN)
+        scored_model(&case_dir, &work.join("final"), &entries)?
     );
     Ok(())
 }

@@ -29,65 +29,28 @@
 //! alone, each frame divided by the albedo its colour predicts (`first=chroma`, the texture fused
 //! from the given poses follows their errors), or against the texture (`first=texture`).
 
-#[path = "common/case_copy.rs"]
-mod case_copy;
+#[path = "common/phantom_run.rs"]
+mod phantom_run;
 
 use bronchosim::image::Frame;
-use bronchosim::io::case::Case;
-use bronchosim::io::poses::{read_poses, PoseEntry};
+use bronchosim::io::poses::PoseEntry;
 use bronchosim::math::Affine;
 use bronchosim::model::Model;
 use bronchosim::registration::chroma::ChromaAlbedo;
 use bronchosim::registration::photometric::PhotometricModel;
 use bronchosim::registration::photometric::RayGrid;
 use bronchosim::registration::{
-    pose_error, pose_error_axes, refine_video, FrameRegistrar, RegistrationOptions, VideoOptions,
+    pose_error_axes, refine_video, FrameRegistrar, RegistrationOptions, VideoOptions,
 };
-use bronchosim::shading::ShadingKind;
 use bronchosim::volume::filter::gaussian_blur;
 use bronchosim::volume::Volume;
-use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
-use case_copy::case_copy;
+use bronchosim::workflow::build::{build_model, BuildOptions};
+use phantom_run::{
+    case_copy, open_phantom, registration_model_options, score, scored_model, PhantomRun,
+};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-fn quantile(v: &[f64], q: f64) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(|a, b| a.total_cmp(b));
-    s[((s.len() - 1) as f64 * q).round() as usize]
-}
-
-/// One line of pose-error statistics.
-fn score(est: &[Affine], truth: &[Affine]) -> String {
-    let e: Vec<(f64, f64)> = est
-        .iter()
-        .zip(truth)
-        .map(|(a, b)| pose_error(a, b))
-        .collect();
-    let mm: Vec<f64> = e.iter().map(|x| x.0).collect();
-    let deg: Vec<f64> = e.iter().map(|x| x.1).collect();
-    let within = e.iter().filter(|x| x.0 <= 1.0 && x.1 <= 1.0).count();
-    let mut ax = [0.0f64; 6];
-    for (a, b) in est.iter().zip(truth) {
-        let (t, r) = pose_error_axes(a, b);
-        for k in 0..3 {
-            ax[k] += t[k] * t[k];
-            ax[3 + k] += r[k] * r[k];
-        }
-    }
-    let ax = ax.map(|v| (v / est.len() as f64).sqrt());
-    format!(
-        "median {:.3} mm {:.3} deg | p95 {:.3} mm {:.3} deg | within 1 mm & 1 deg {}/{} | RMS x {:.3} y {:.3} z {:.3} mm, pitch {:.3} yaw {:.3} roll {:.3} deg",
-        quantile(&mm, 0.5),
-        quantile(&deg, 0.5),
-        quantile(&mm, 0.95),
-        quantile(&deg, 0.95),
-        within,
-        est.len(),
-        ax[0], ax[1], ax[2], ax[3], ax[4], ax[5]
-    )
-}
 
 /// Per-frame errors (true camera axes, mm and degrees) of the frames' own and the smoothed
 /// poses, as CSV.
@@ -321,35 +284,14 @@ fn main() -> anyhow::Result<()> {
             _ => anyhow::bail!("unknown argument {kv}"),
         }
     }
-    let case = Case::open(&case_dir)?;
-    let truth: Vec<Affine> = read_poses(&case_dir.join("truth/poses.json"), &case_dir)?
-        .iter()
-        .map(|p| p.pose.camera_to_world)
-        .collect();
-    let frames: Vec<_> = case.frame_source()?.collect::<Result<_, _>>()?;
-    let mut entries = case.poses.clone();
-    if let Some(s) = &start {
-        // Start from another case's poses (e.g. an earlier run's round).
-        for (e, p) in entries
-            .iter_mut()
-            .zip(read_poses(&s.join("poses.json"), s)?)
-        {
-            e.pose.camera_to_world = p.pose.camera_to_world;
-        }
-    }
+    let PhantomRun {
+        truth,
+        frames,
+        mut entries,
+    } = open_phantom(&case_dir, start.as_deref())?;
     let poses_of = |e: &[PoseEntry]| e.iter().map(|p| p.pose.camera_to_world).collect::<Vec<_>>();
     println!("round 0 (given): {}", score(&poses_of(&entries), &truth));
-    let mut build_opts = BuildOptions {
-        cross_validate_every: 0,
-        shading: Some(ShadingKind::Calibrated),
-        poses: PosesMode::Fixed,
-        quiet: true,
-        force: true,
-        ..Default::default()
-    };
-    // Every frame is registered each round, so each round's model needs every frame's gain:
-    // no frame selection, however long the video.
-    build_opts.selection.max_frames = 0;
+    let mut build_opts = registration_model_options();
     if let Some(e) = fusion_exponent {
         build_opts.fusion.method =
             bronchosim::texture::fusion::FusionMethod::WeightedAverage { weight_exponent: e };
@@ -488,24 +430,9 @@ fn main() -> anyhow::Result<()> {
     if !final_model {
         return Ok(());
     }
-    let dir = work.join("final");
-    if dir.join("case").exists() {
-        std::fs::remove_dir_all(dir.join("case"))?;
-    }
-    case_copy(&case_dir, &dir.join("case"), &entries)?;
-    let opts = BuildOptions {
-        truth: Some(case_dir.join("truth")),
-        poses: PosesMode::Fixed,
-        quiet: true,
-        force: true,
-        ..Default::default()
-    };
-    build_model(&dir.join("case"), &dir.join("model"), &opts)?;
-    let eval: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("model/evaluation.json"))?)?;
     println!(
         "final model: new views {:.2} dB (calibrated light)",
-        eval[0]["mean_psnr_db"].as_f64().unwrap_or(f64::NAN)
+        scored_model(&case_dir, &work.join("final"), &entries)?
     );
     Ok(())
 }

@@ -13,10 +13,11 @@ use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::registration::joint::{refine_jointly, JointOptions, JointRole};
 use bronchosim::registration::pose::perturb;
 use bronchosim::registration::{pose_error, FrameRegistrar, RegistrationOptions};
-use bronchosim::shading::ShadingKind;
-use bronchosim::texture::synthesis::{SynthesisOptions, UnseenMode};
-use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
 use std::path::Path;
+
+#[path = "common/registration_model.rs"]
+mod registration_model;
+use registration_model::build;
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -36,7 +37,7 @@ fn errors(poses: &[Affine], truth: &[Affine]) -> (f64, f64) {
     )
 }
 
-/// A model of the case at `case` with `poses` (fixed), as the build's rounds fuse it.
+/// A model of the case at `case` with `poses` (fixed), as the registration tests build it.
 fn build_with(case: &Path, poses: &[Affine], dir: &Path) -> Model {
     let c = Case::open(case).unwrap();
     let to = dir.join("case");
@@ -60,21 +61,7 @@ fn build_with(case: &Path, poses: &[Affine], dir: &Path) -> Model {
         })
         .collect();
     write_poses(&to.join("poses.json"), &entries, &to).unwrap();
-    let defaults = BuildOptions::default();
-    let opts = BuildOptions {
-        cross_validate_every: 0,
-        shading: Some(ShadingKind::Calibrated),
-        poses: PosesMode::Fixed,
-        quiet: true,
-        unseen: SynthesisOptions {
-            mode: UnseenMode::Fill,
-            ..defaults.unseen.clone()
-        },
-        leave_out_blurred: false,
-        ..defaults
-    };
-    build_model(&to, &dir.join("model"), &opts).unwrap();
-    Model::load(&dir.join("model")).unwrap()
+    build(&to, &dir.join("model"))
 }
 
 #[test]

@@ -28,14 +28,16 @@ use bronchosim::registration::{
     RegistrationOptions, RoundKind, RoundOptions, VideoOptions, VideoRegistration,
 };
 use bronchosim::shading::ShadingKind;
-use bronchosim::texture::synthesis::{SynthesisOptions, UnseenMode};
 use bronchosim::workflow::build::{build_model, BuildOptions, PosesMode};
 use bronchosim::workflow::register::register_command;
 use bronchosim::workflow::summary::build_text;
 use std::path::Path;
 
+#[path = "common/registration_model.rs"]
+mod registration_model;
 #[path = "common/untracked.rs"]
 mod untracked;
+use registration_model::build;
 use untracked::phantom_cut_to;
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -90,31 +92,6 @@ fn case_with_poses(case: &Path, to: &Path, entries: &[PoseEntry], poses: &[Affin
         })
         .collect();
     write_poses(&to.join("poses.json"), &moved, to).unwrap();
-}
-
-fn build(case: &Path, out: &Path) -> Model {
-    let defaults = BuildOptions::default();
-    let opts = BuildOptions {
-        cross_validate_every: 0,
-        shading: Some(ShadingKind::Calibrated),
-        poses: PosesMode::Fixed,
-        quiet: true,
-        // Frames are registered against what the video saw, as the build's own rounds and
-        // `bronchosim register` do (their consensus texture is filled, not synthesised): a
-        // made-up vessel pattern on unseen walls gives the rotation false matches (with it,
-        // the first round below ends at 2.16 deg from 1.73).
-        unseen: SynthesisOptions {
-            mode: UnseenMode::Fill,
-            ..defaults.unseen.clone()
-        },
-        // Every frame is registered against the model, and the model of the tracker's poses
-        // is one of them: at those poses the check for blurred frames leaves out the frames
-        // they misplace most (the first and the last here, 0.70 and 0.39 of the median).
-        leave_out_blurred: false,
-        ..defaults
-    };
-    build_model(case, out, &opts).unwrap();
-    Model::load(out).unwrap()
 }
 
 fn register(

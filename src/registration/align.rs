@@ -339,6 +339,33 @@ pub struct PointRow {
     pub specular: [f32; 6],
 }
 
+impl PointRow {
+    /// The prediction with albedo `albedo`.
+    #[inline]
+    pub fn predicted(&self, albedo: f64) -> f64 {
+        albedo * f64::from(self.per_albedo) + f64::from(self.fixed)
+    }
+
+    /// The residual (observed minus predicted) with albedo `albedo`.
+    #[inline]
+    pub fn residual(&self, albedo: f64) -> f64 {
+        f64::from(self.obs) - self.predicted(albedo)
+    }
+
+    /// The residual's derivative over the pose step and log k with albedo `albedo`.
+    #[inline]
+    pub fn jacobian(&self, albedo: f64) -> [f64; 7] {
+        std::array::from_fn(|i| match i {
+            6 => -self.predicted(albedo),
+            _ => {
+                f64::from(self.image[i])
+                    - albedo * f64::from(self.shade[i])
+                    - f64::from(self.specular[i])
+            }
+        })
+    }
+}
+
 impl LevelProblem<'_> {
     /// The residual rows of the points usable where they were rendered, projected from `pose`
     /// with gain factor `exp(log_k)`: the pieces [`LevelProblem::evaluate`] sums, per point

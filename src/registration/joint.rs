@@ -149,7 +149,7 @@ fn solve_albedo(rows: &[Option<Rows>], unknowns: usize, k: f64, reweightings: us
                     continue;
                 }
                 let u = u as usize;
-                let (pa, y) = (f64::from(row.per_albedo), f64::from(row.obs - row.fixed));
+                let (pa, y) = (f64::from(row.per_albedo), row.residual(0.0));
                 let w = match pass {
                     0 => 1.0,
                     _ => huber(y - a[u] * pa, k).1,
@@ -178,8 +178,7 @@ fn total_cost(rows: &[Option<Rows>], a: &[f64], k: f64, expected: &[usize]) -> (
             if u == u32::MAX || !a[u as usize].is_finite() {
                 continue;
             }
-            let e = f64::from(row.obs - row.fixed) - a[u as usize] * f64::from(row.per_albedo);
-            cost += huber(e, k).0;
+            cost += huber(row.residual(a[u as usize]), k).0;
             here += 1;
         }
         cost += want.saturating_sub(here) as f64 * penalty;
@@ -233,17 +232,9 @@ fn reduced_system(
                 }
                 let al = a[u as usize];
                 let pa = f64::from(row.per_albedo);
-                let m = al * pa + f64::from(row.fixed);
-                let e = f64::from(row.obs) - m;
+                let e = row.residual(al);
                 let w = huber(e, k).1;
-                let j: [f64; P] = std::array::from_fn(|i| match i {
-                    6 => -m,
-                    _ => {
-                        f64::from(row.image[i])
-                            - al * f64::from(row.shade[i])
-                            - f64::from(row.specular[i])
-                    }
-                });
+                let j = row.jacobian(al);
                 for (i, &ji) in j.iter().enumerate() {
                     for (h, &jl) in s.h[i][i..].iter_mut().zip(&j[i..]) {
                         *h += w * ji * jl;
@@ -582,19 +573,14 @@ mod tests {
                     continue;
                 }
                 let al = a[u as usize];
-                let pa = f64::from(row.per_albedo);
-                let pred = al * pa + f64::from(row.fixed);
-                let e = f64::from(row.obs) - pred;
+                let e = row.residual(al);
                 let w = huber(e, k).1;
                 down_weighted += usize::from(w < 1.0);
                 let mut j = DVector::<f64>::zeros(m);
-                for i in 0..6 {
-                    j[P * f + i] = f64::from(row.image[i])
-                        - al * f64::from(row.shade[i])
-                        - f64::from(row.specular[i]);
+                for (i, ji) in row.jacobian(al).into_iter().enumerate() {
+                    j[P * f + i] = ji;
                 }
-                j[P * f + 6] = -pred;
-                j[P * frames + u as usize] = -pa;
+                j[P * frames + u as usize] = -f64::from(row.per_albedo);
                 full += &j * j.transpose() * w;
                 grad += &j * (w * e);
             }
@@ -635,7 +621,7 @@ mod tests {
             for (row, &u) in r.rows.iter().zip(&r.unknown) {
                 if u != u32::MAX {
                     let pa = f64::from(row.per_albedo);
-                    let e = f64::from(row.obs - row.fixed) - a[u as usize] * pa;
+                    let e = row.residual(a[u as usize]);
                     sums[u as usize] += pa * e;
                 }
             }
