@@ -266,6 +266,14 @@ fn build_refines_tracker_poses_and_leaves_a_wrong_one_out() {
         .expect("model.json records the registration");
     assert_eq!(reg.frames.len(), 24);
     assert_eq!(reg.rounds.len(), 2);
+    // After the rounds, the frames they ran on refined at once (those they flagged not).
+    let joint = reg.joint.as_ref().expect("the joint stage ran");
+    let last = reg.rounds.last().unwrap();
+    assert_eq!(joint.counts, last.counts);
+    assert!(
+        joint.median_step_mm > 0.0 && joint.median_step_mm < 0.5,
+        "{joint:?}"
+    );
     assert!(!reg.frames[12].used, "frame 12: {:?}", reg.frames[12]);
     assert_eq!(reg.left_out, reg.frames.iter().filter(|f| !f.used).count());
     assert_eq!(m.counts.frames, 24 - reg.left_out);
@@ -404,7 +412,10 @@ fn register_command_writes_poses_and_a_report_and_refuses_bad_input() {
         String::from_utf8_lossy(&out.stderr)
     );
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("poses registered in 1 rounds"), "{text}");
+    assert!(
+        text.contains("poses registered in 1 rounds and all frames at once"),
+        "{text}"
+    );
     let poses = read_poses(&dir.join("reg/poses.json"), &dir.join("case")).unwrap();
     assert_eq!(poses.len(), 12);
     let record: serde_json::Value =

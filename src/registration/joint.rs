@@ -507,6 +507,35 @@ pub fn refine_jointly(
     })
 }
 
+/// The roles of each solve over consecutive windows of `window` of the frames `roles`
+/// refines, each with the `anchors` frames refined just before it held as anchors (the
+/// frames `roles` anchors stay anchors, all others are skipped); one solve, `roles` itself,
+/// when they fit in one window.
+pub fn joint_windows(roles: &[JointRole], window: usize, anchors: usize) -> Vec<Vec<JointRole>> {
+    let refined: Vec<usize> = (0..roles.len())
+        .filter(|&i| roles[i] == JointRole::Refined)
+        .collect();
+    if refined.len() <= window.max(1) {
+        return vec![roles.to_vec()];
+    }
+    refined
+        .chunks(window.max(1))
+        .enumerate()
+        .map(|(w, chunk)| {
+            let start = w * window;
+            let before = &refined[start.saturating_sub(anchors)..start];
+            (0..roles.len())
+                .map(|i| match roles[i] {
+                    JointRole::Refined if chunk.contains(&i) => JointRole::Refined,
+                    JointRole::Refined if before.contains(&i) => JointRole::Anchor,
+                    JointRole::Anchor => JointRole::Anchor,
+                    _ => JointRole::Skipped,
+                })
+                .collect()
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -607,6 +636,28 @@ mod tests {
         );
         assert!((&g - &rhs).amax() < 1e-9 * rhs.amax().max(1.0));
         assert!(h.amax() > 0.0 && g.amax() > 0.0);
+    }
+
+    #[test]
+    fn long_videos_are_refined_in_windows_with_anchors_before_each() {
+        use JointRole::{Anchor as A, Refined as R, Skipped as S};
+        let roles = [A, R, R, S, R, R, R, R];
+        // Six frames to refine fit one window of six: the roles as they are.
+        assert_eq!(joint_windows(&roles, 6, 2), vec![roles.to_vec()]);
+        let w = joint_windows(&roles, 4, 2);
+        assert_eq!(
+            w,
+            vec![
+                vec![A, R, R, S, R, R, S, S],
+                // The two frames refined last in the first window hold the second.
+                vec![A, S, S, S, A, A, R, R],
+            ]
+        );
+        // Every frame to refine is refined in exactly one window.
+        for i in 0..roles.len() {
+            let n = w.iter().filter(|r| r[i] == R).count();
+            assert_eq!(n, usize::from(roles[i] == R), "frame {i}");
+        }
     }
 
     /// The albedo solve is the weighted least-squares mean: with no residual beyond the

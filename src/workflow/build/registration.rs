@@ -52,7 +52,7 @@ use crate::registration::{
     blocks::BlockOptions,
     consensus::consensus_poses,
     delta_between, interpolate_flagged,
-    joint::{refine_jointly, JointOptions, JointRole},
+    joint::{joint_windows, refine_jointly, JointOptions, JointRole},
     register_round,
     rounds::levels_below_reference,
     FrameRegistrar, FrameRegistration, FrameStatus, ModelParts, RegistrationOptions, RoundKind,
@@ -698,10 +698,7 @@ fn joint_stage(
             ..RegistrationOptions::default()
         },
     )?;
-    // Consecutive windows of the frames to refine, each with the frames refined just before
-    // it held as anchors.
-    let refined: Vec<usize> = (0..n).filter(|&i| roles[i] == JointRole::Refined).collect();
-    let windows: Vec<&[usize]> = refined.chunks(JOINT_WINDOW).collect();
+    let windows = joint_windows(&roles, JOINT_WINDOW, JOINT_WINDOW_ANCHORS);
     let joint = JointOptions::default();
     let progress = Progress::new(
         "register (all frames at once)",
@@ -709,17 +706,7 @@ fn joint_stage(
         opts.quiet,
     );
     let mut poses = scene.poses.clone();
-    for (w, window) in windows.iter().enumerate() {
-        let before =
-            &refined[(w * JOINT_WINDOW).saturating_sub(JOINT_WINDOW_ANCHORS)..w * JOINT_WINDOW];
-        let window_roles: Vec<JointRole> = (0..n)
-            .map(|i| match roles[i] {
-                JointRole::Refined if window.contains(&i) => JointRole::Refined,
-                JointRole::Refined if before.contains(&i) => JointRole::Anchor,
-                JointRole::Anchor => JointRole::Anchor,
-                _ => JointRole::Skipped,
-            })
-            .collect();
+    for window_roles in &windows {
         for &level in &levels {
             poses = refine_jointly(
                 &reg,
@@ -727,7 +714,7 @@ fn joint_stage(
                 &light.gains,
                 view.mask.as_deref(),
                 &poses,
-                &window_roles,
+                window_roles,
                 &JointOptions {
                     level,
                     progress: progress.bar(),
