@@ -54,6 +54,10 @@ impl Default for JointOptions {
             level: 1,
             renders: 3,
             steps: 4,
+            // Small enough that a cell's albedo barely varies inside it, large enough that
+            // several frames see each: from the rounds' poses of the demo phantom with a
+            // 1.5 mm / 2 deg tracker, new views 31.23 / 31.56 / 32.01 / 31.91 dB with cells of
+            // 0.1 / 0.15 / 0.25 / 0.4 mm (nothing held; BENCHMARKS.md, session 38).
             cell_mm: 0.25,
             min_frames: 2,
             trust_px: 1.0,
@@ -80,7 +84,7 @@ pub struct JointResult {
 /// How much stiffer than the data the hold on the mean shift along the view is. Moving every
 /// camera along its view is nearly invisible to an albedo that moves with them, and the
 /// reduced cost drifts there: from the demo phantom's true poses every camera went back
-/// 0.04-0.08 mm and new views fell 33.37 -> 32.05 dB; with the mean held, 33.10 dB. The rounds
+/// 0.04-0.08 mm and new views fell 33.37 -> 32.05 dB; with the mean held, 33.12 dB. The rounds
 /// against the CT's shading, where the light's fall-off with distance places the camera,
 /// set that mean.
 const HOLD_STIFFNESS: f64 = 100.0;
@@ -363,8 +367,10 @@ pub fn refine_jointly(
                     .ok()
             })
             .collect();
-        // Cells, and the frames that see each.
-        let mut cells: HashMap<u64, (u32, usize, u32)> = HashMap::new();
+        // Cells (numbered in the order the frames' points first meet them, so that the
+        // sums run in the same order on every run), and how many frames see each.
+        let mut cells: HashMap<u64, u32> = HashMap::new();
+        let mut seeing: Vec<(usize, u32)> = Vec::new();
         let keys: Vec<Vec<u64>> = snaps
             .iter()
             .map(|s| {
@@ -377,27 +383,36 @@ pub fn refine_jointly(
                 })
             })
             .collect();
-        for (f, ks) in keys.iter().enumerate() {
-            for &key in ks {
-                let next = cells.len() as u32;
-                let c = cells.entry(key).or_insert((next, usize::MAX, 0));
-                if c.1 != f {
-                    c.1 = f;
-                    c.2 += 1;
-                }
-            }
-        }
-        let mut index = vec![u32::MAX; cells.len()];
+        let point_cell: Vec<Vec<u32>> = keys
+            .iter()
+            .enumerate()
+            .map(|(f, ks)| {
+                ks.iter()
+                    .map(|&key| {
+                        let id = *cells.entry(key).or_insert_with(|| {
+                            seeing.push((usize::MAX, 0));
+                            seeing.len() as u32 - 1
+                        });
+                        let c = &mut seeing[id as usize];
+                        if c.0 != f {
+                            *c = (f, c.1 + 1);
+                        }
+                        id
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut index = vec![u32::MAX; seeing.len()];
         let mut kept = 0u32;
-        for &(i, _, frames_seeing) in cells.values() {
+        for (i, &(_, frames_seeing)) in seeing.iter().enumerate() {
             if frames_seeing as usize >= opts.min_frames {
-                index[i as usize] = kept;
+                index[i] = kept;
                 kept += 1;
             }
         }
-        let point_cell: Vec<Vec<u32>> = keys
+        let point_cell: Vec<Vec<u32>> = point_cell
             .iter()
-            .map(|ks| ks.iter().map(|key| index[cells[key].0 as usize]).collect())
+            .map(|ids| ids.iter().map(|&id| index[id as usize]).collect())
             .collect();
         let unknowns = 3 * kept as usize;
         let median_depth: Vec<f64> = snaps
