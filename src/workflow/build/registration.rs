@@ -648,8 +648,9 @@ const LATER_TEXTURE_FROM_ROUND: usize = 2;
 
 /// The pyramid levels of the joint stage at the reference frame size (counted as the rounds'
 /// are, [`levels_below_reference`]): level 1 gathers the move, level 0 places it (demo phantom,
-/// the rounds' poses from a 1.5 mm / 2 deg tracker: new views 31.06 -> 32.94 dB; level 0 alone
-/// or levels 2, 1, 0 no better; BENCHMARKS.md, session 38).
+/// the rounds' poses from a 1.5 mm / 2 deg tracker: new views 31.06 -> 32.94 dB; with the
+/// mean shift along the view taken back after each level, levels 1, 0 gave 32.77 dB and
+/// levels 2, 1, 0 32.74 dB; BENCHMARKS.md, session 38).
 const JOINT_LEVELS: [usize; 2] = [1, 0];
 
 /// Most frames the joint stage refines in one solve. Its normal equations are dense, seven
