@@ -6,62 +6,23 @@
 //! video after the rounds is measured in BENCHMARKS.md (session 38).
 
 use bronchosim::io::case::Case;
-use bronchosim::io::poses::{write_poses, FrameRef, PoseEntry};
 use bronchosim::math::Affine;
 use bronchosim::model::Model;
 use bronchosim::phantom::{write_phantom_case, PhantomOptions};
 use bronchosim::registration::joint::{refine_jointly, JointOptions, JointRole};
 use bronchosim::registration::pose::perturb;
-use bronchosim::registration::{pose_error, FrameRegistrar, RegistrationOptions};
+use bronchosim::registration::{FrameRegistrar, RegistrationOptions};
 use std::path::Path;
 
 #[path = "common/registration_model.rs"]
 mod registration_model;
-use registration_model::build;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
-/// Median translation (mm) and rotation (degrees) error.
-fn errors(poses: &[Affine], truth: &[Affine]) -> (f64, f64) {
-    let e: Vec<(f64, f64)> = poses
-        .iter()
-        .zip(truth)
-        .map(|(a, b)| pose_error(a, b))
-        .collect();
-    (
-        median(e.iter().map(|x| x.0).collect()),
-        median(e.iter().map(|x| x.1).collect()),
-    )
-}
+use registration_model::{build, case_with_poses, errors};
 
 /// A model of the case at `case` with `poses` (fixed), as the registration tests build it.
 fn build_with(case: &Path, poses: &[Affine], dir: &Path) -> Model {
-    let c = Case::open(case).unwrap();
-    let to = dir.join("case");
-    std::fs::create_dir_all(to.join("frames")).unwrap();
-    std::fs::copy(case.join("ct.nii.gz"), to.join("ct.nii.gz")).unwrap();
-    std::fs::copy(case.join("camera.json"), to.join("camera.json")).unwrap();
-    let entries: Vec<PoseEntry> = c
-        .poses
-        .iter()
-        .zip(poses)
-        .map(|(e, p)| {
-            let FrameRef::Image(img) = &e.frame else {
-                panic!("the phantom writes image frames")
-            };
-            let name = img.file_name().unwrap();
-            std::fs::copy(img, to.join("frames").join(name)).unwrap();
-            PoseEntry {
-                frame: FrameRef::Image(to.join("frames").join(name)),
-                pose: bronchosim::camera::Pose::new(*p),
-            }
-        })
-        .collect();
-    write_poses(&to.join("poses.json"), &entries, &to).unwrap();
-    build(&to, &dir.join("model"))
+    let entries = Case::open(case).unwrap().poses;
+    case_with_poses(case, &dir.join("case"), &entries, poses);
+    build(&dir.join("case"), &dir.join("model"))
 }
 
 #[test]
@@ -94,7 +55,7 @@ fn a_smooth_error_shrinks_and_true_poses_stay() {
             perturb(p, &[0.4 * t, -0.3 * t, 0.0, a, -0.8 * a, 0.0])
         })
         .collect();
-    let (mm0, deg0) = errors(&drifted, &truth);
+    let (mm0, deg0, _) = errors(&drifted, &truth);
     assert!(mm0 > 0.1 && deg0 > 0.35, "{mm0} mm {deg0} deg");
 
     // The model's geometry and light (the texture is not used).
@@ -127,7 +88,7 @@ fn a_smooth_error_shrinks_and_true_poses_stay() {
         },
     )
     .unwrap();
-    let (mm, deg) = errors(&refined.poses, &truth);
+    let (mm, deg, _) = errors(&refined.poses, &truth);
     println!(
         "drift {mm0:.3} mm {deg0:.3} deg; all at once {mm:.3} mm {deg:.3} deg; costs {:?}",
         refined.costs
@@ -160,7 +121,7 @@ fn a_smooth_error_shrinks_and_true_poses_stay() {
     assert_eq!(kept.poses[5], drifted[0]);
     let others: Vec<usize> = (1..n).filter(|&f| f != 5).collect();
     let pick = |p: &[Affine]| others.iter().map(|&f| p[f]).collect::<Vec<_>>();
-    let (mm, deg) = errors(&pick(&kept.poses), &pick(&truth));
+    let (mm, deg, _) = errors(&pick(&kept.poses), &pick(&truth));
     println!("true poses moved {mm:.4} mm {deg:.4} deg");
     // The bound for true poses is 0.1 mm; the rotation moves about as the rounds' do.
     assert!(mm < 0.1 && deg < 0.3, "{mm} mm {deg} deg");

@@ -13,7 +13,7 @@
 use bronchosim::camera::Pose;
 use bronchosim::image::Frame;
 use bronchosim::io::case::Case;
-use bronchosim::io::poses::{read_poses, write_poses, FrameRef, PoseEntry};
+use bronchosim::io::poses::{read_poses, write_poses, PoseEntry};
 use bronchosim::math::{Affine, Vector3};
 use bronchosim::model::{Model, ModelManifest};
 use bronchosim::phantom::motion_blur::MotionBlur;
@@ -37,29 +37,8 @@ use std::path::Path;
 mod registration_model;
 #[path = "common/untracked.rs"]
 mod untracked;
-use registration_model::build;
+use registration_model::{build, case_with_poses, errors};
 use untracked::phantom_cut_to;
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
-/// Median centre and rotation errors of `poses` against `truth`, and the frames within 1 mm
-/// and 1 degree.
-fn errors(poses: &[Affine], truth: &[Affine]) -> (f64, f64, usize) {
-    let e: Vec<(f64, f64)> = poses
-        .iter()
-        .zip(truth)
-        .map(|(p, t)| pose_error(p, t))
-        .collect();
-    let within = e.iter().filter(|x| x.0 <= 1.0 && x.1 <= 1.0).count();
-    (
-        median(e.iter().map(|x| x.0).collect()),
-        median(e.iter().map(|x| x.1).collect()),
-        within,
-    )
-}
 
 /// The phantom case's true poses (truth/poses.json).
 fn true_poses(case_dir: &Path) -> Vec<Affine> {
@@ -68,30 +47,6 @@ fn true_poses(case_dir: &Path) -> Vec<Affine> {
         .iter()
         .map(|p| p.pose.camera_to_world)
         .collect()
-}
-
-/// A copy of `case` at `to` whose poses.json holds `poses` (other files hard-linked).
-fn case_with_poses(case: &Path, to: &Path, entries: &[PoseEntry], poses: &[Affine]) {
-    std::fs::create_dir_all(to.join("frames")).unwrap();
-    for name in ["ct.nii.gz", "camera.json"] {
-        std::fs::hard_link(case.join(name), to.join(name)).unwrap();
-    }
-    let moved: Vec<PoseEntry> = entries
-        .iter()
-        .zip(poses)
-        .map(|(e, p)| {
-            let FrameRef::Image(img) = &e.frame else {
-                panic!("the phantom writes PNG frames")
-            };
-            let dest = to.join("frames").join(img.file_name().unwrap());
-            std::fs::hard_link(img, &dest).unwrap();
-            PoseEntry {
-                frame: FrameRef::Image(dest),
-                pose: Pose::new(*p),
-            }
-        })
-        .collect();
-    write_poses(&to.join("poses.json"), &moved, to).unwrap();
 }
 
 fn register(
