@@ -31,10 +31,7 @@ fn main() -> anyhow::Result<()> {
     let work = PathBuf::from(&args[1]);
     let mut start: Option<PathBuf> = None;
     let mut levels = vec![1usize, 0];
-    let mut opts = JointOptions {
-        verbose: true,
-        ..Default::default()
-    };
+    let mut opts = JointOptions::default();
     let mut final_model = true;
     for kv in &args[2..] {
         match kv.split_once('=') {
@@ -92,6 +89,9 @@ fn main() -> anyhow::Result<()> {
                 ..opts.clone()
             },
         )?;
+        for (render, (before, after)) in r.costs.iter().enumerate() {
+            println!("level {level} render {render}: mean cost {before:.4} -> {after:.4}");
+        }
         current = r.poses;
         println!(
             "level {level} ({:.1} s): {}",

@@ -42,8 +42,6 @@ pub struct JointOptions {
     /// The mean over the frames of the shift along each camera's view axis stays where it
     /// started (see [`HOLD_STIFFNESS`]).
     pub hold_mean_view_shift: bool,
-    /// Print each render's cost.
-    pub verbose: bool,
     /// Ticked once per render.
     pub progress: Option<indicatif::ProgressBar>,
 }
@@ -64,7 +62,6 @@ impl Default for JointOptions {
             reweightings: 2,
             estimate_gain: true,
             hold_mean_view_shift: true,
-            verbose: false,
             progress: None,
         }
     }
@@ -75,8 +72,6 @@ impl Default for JointOptions {
 pub struct JointResult {
     /// Every frame's pose.
     pub poses: Vec<Affine>,
-    /// Every frame's log gain correction.
-    pub log_k: Vec<f64>,
     /// Mean robust cost per residual before and after each render's steps.
     pub costs: Vec<(f64, f64)>,
 }
@@ -357,7 +352,7 @@ pub fn refine_jointly(
     let mut poses = poses.to_vec();
     let mut log_k = vec![0.0; n];
     let mut costs = Vec::new();
-    for render in 0..opts.renders {
+    for _ in 0..opts.renders {
         let snaps: Vec<Option<Snapshot>> = (0..n)
             .into_par_iter()
             .map(|f| {
@@ -505,21 +500,12 @@ pub fn refine_jointly(
             }
         }
         let end_cost = (cost - held(hold, &poses)) / count.max(1) as f64;
-        if opts.verbose {
-            eprintln!(
-                "joint render {render}: {kept} cells seen twice or more, {count} residuals, cost {start_cost:.4} -> {end_cost:.4}"
-            );
-        }
         costs.push((start_cost, end_cost));
         if let Some(p) = &opts.progress {
             p.inc(1);
         }
     }
-    Ok(JointResult {
-        poses,
-        log_k,
-        costs,
-    })
+    Ok(JointResult { poses, costs })
 }
 
 /// The roles of each solve over consecutive windows of `window` of the frames `roles`
