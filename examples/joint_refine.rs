@@ -5,7 +5,7 @@
 //! ```sh
 //! cargo run --release --example joint_refine -- CASE WORK start=DIR [levels=1,0] [renders=3]
 //!     [steps=4] [cell=0.25] [trust=1] [minframes=2] [gain=yes|no] [hold=yes|no]
-//!     [final=yes|no]
+//!     [final=yes|no] [search=yes|no] [run=6] [gainmin=0.005]
 //! ```
 //! `start=DIR` reads `DIR/poses.json` (e.g. a model built with registration). WORK receives
 //! `start/case` and `start/model` (built with those poses, every frame, no hold-out), and
@@ -17,6 +17,7 @@ mod phantom_run;
 use bronchosim::math::Affine;
 use bronchosim::model::Model;
 use bronchosim::registration::joint::{refine_jointly, JointOptions, JointRole};
+use bronchosim::registration::joint_shift::ShiftSearch;
 use bronchosim::registration::{FrameRegistrar, RegistrationOptions};
 use bronchosim::workflow::build::build_model;
 use phantom_run::{
@@ -33,6 +34,7 @@ fn main() -> anyhow::Result<()> {
     let mut levels = vec![1usize, 0];
     let mut opts = JointOptions::default();
     let mut final_model = true;
+    let mut search: Option<ShiftSearch> = None;
     for kv in &args[2..] {
         match kv.split_once('=') {
             Some(("start", v)) => start = Some(PathBuf::from(v)),
@@ -47,6 +49,17 @@ fn main() -> anyhow::Result<()> {
             Some(("final", v)) => final_model = v == "yes",
             Some(("gain", v)) => opts.estimate_gain = v == "yes",
             Some(("hold", v)) => opts.hold_mean_view_shift = v == "yes",
+            Some(("search", v)) => search = (v == "yes").then(ShiftSearch::default),
+            Some(("run", v)) => {
+                if let Some(s) = search.as_mut() {
+                    s.run_frames = v.parse()?
+                }
+            }
+            Some(("gainmin", v)) => {
+                if let Some(s) = search.as_mut() {
+                    s.min_gain = v.parse()?
+                }
+            }
             _ => anyhow::bail!("unknown argument {kv}"),
         }
     }
@@ -86,9 +99,16 @@ fn main() -> anyhow::Result<()> {
             &vec![JointRole::Refined; frames.len()],
             &JointOptions {
                 level,
+                shift_search: search.take(),
                 ..opts.clone()
             },
         )?;
+        for s in &r.shifted {
+            println!(
+                "level {level}: frames {:?} moved {:+.2} mm along their views, cost {:.4} -> {:.4}",
+                s.frames, s.shift_mm, s.cost_before, s.cost_after
+            );
+        }
         for (render, (before, after)) in r.costs.iter().enumerate() {
             println!("level {level} render {render}: mean cost {before:.4} -> {after:.4}");
         }

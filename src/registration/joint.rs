@@ -9,6 +9,7 @@
 
 use super::align::{huber, PointRow};
 use super::frame::{FrameObs, FrameRegistrar};
+use super::joint_shift::{search_run_shifts, RunShift, ShiftSearch};
 use super::level::Snapshot;
 use super::pose::{perturb, rotation_of};
 use super::pyramid::ObservedPyramid;
@@ -42,6 +43,9 @@ pub struct JointOptions {
     /// The mean over the frames of the shift along each camera's view axis stays where it
     /// started (see [`HOLD_STIFFNESS`]).
     pub hold_mean_view_shift: bool,
+    /// Before the first render's steps, runs of frames are tried at a few shifts along their
+    /// views ([`super::joint_shift`]); `None`: not.
+    pub shift_search: Option<ShiftSearch>,
     /// Ticked once per render.
     pub progress: Option<indicatif::ProgressBar>,
 }
@@ -62,6 +66,7 @@ impl Default for JointOptions {
             reweightings: 2,
             estimate_gain: true,
             hold_mean_view_shift: true,
+            shift_search: None,
             progress: None,
         }
     }
@@ -74,6 +79,11 @@ pub struct JointResult {
     pub poses: Vec<Affine>,
     /// Mean robust cost per residual before and after each render's steps.
     pub costs: Vec<(f64, f64)>,
+    /// The runs [`JointOptions::shift_search`] moved.
+    pub shifted: Vec<RunShift>,
+    /// Each frame's mean robust cost per residual at the end, against the albedo all frames
+    /// agree on (`None`: not rendered).
+    pub frame_costs: Vec<Option<f64>>,
 }
 
 /// How much stiffer than the data the hold on the mean shift along the view is. Moving every
@@ -105,7 +115,7 @@ struct Rows {
 }
 
 /// Cell key of a world point.
-fn cell_key(x: &crate::math::Vector3<f64>, edge: f64) -> u64 {
+pub(super) fn cell_key(x: &crate::math::Vector3<f64>, edge: f64) -> u64 {
     let q = |v: f64| ((v / edge).floor() as i64 + (1 << 20)) as u64 & 0x1f_ffff;
     q(x.x) | q(x.y) << 21 | q(x.z) << 42
 }
@@ -134,6 +144,63 @@ fn rows_at(
             Some(Rows { rows, unknown })
         })
         .collect()
+}
+
+/// The albedo cells of the points `snaps` render: per frame and point, the cell's number
+/// (`u32::MAX` for a point in a cell fewer than `opts.min_frames` frames see), and the number
+/// of albedo unknowns (three channels a cell).
+pub(super) fn number_cells(
+    snaps: &[Option<Snapshot>],
+    opts: &JointOptions,
+) -> (Vec<Vec<u32>>, usize) {
+    // Cells (numbered in the order the frames' points first meet them, so that the
+    // sums run in the same order on every run), and how many frames see each.
+    let mut cells: HashMap<u64, u32> = HashMap::new();
+    let mut seeing: Vec<(usize, u32)> = Vec::new();
+    let keys: Vec<Vec<u64>> = snaps
+        .iter()
+        .map(|s| {
+            s.as_ref().map_or(Vec::new(), |s| {
+                s.prob
+                    .points
+                    .iter()
+                    .map(|q| cell_key(&q.x, opts.cell_mm))
+                    .collect()
+            })
+        })
+        .collect();
+    let point_cell: Vec<Vec<u32>> = keys
+        .iter()
+        .enumerate()
+        .map(|(f, ks)| {
+            ks.iter()
+                .map(|&key| {
+                    let id = *cells.entry(key).or_insert_with(|| {
+                        seeing.push((usize::MAX, 0));
+                        seeing.len() as u32 - 1
+                    });
+                    let c = &mut seeing[id as usize];
+                    if c.0 != f {
+                        *c = (f, c.1 + 1);
+                    }
+                    id
+                })
+                .collect()
+        })
+        .collect();
+    let mut index = vec![u32::MAX; seeing.len()];
+    let mut kept = 0u32;
+    for (i, &(_, frames_seeing)) in seeing.iter().enumerate() {
+        if frames_seeing as usize >= opts.min_frames {
+            index[i] = kept;
+            kept += 1;
+        }
+    }
+    let point_cell: Vec<Vec<u32>> = point_cell
+        .iter()
+        .map(|ids| ids.iter().map(|&id| index[id as usize]).collect())
+        .collect();
+    (point_cell, 3 * kept as usize)
 }
 
 /// The albedo of every unknown that best explains `rows` (Huber-reweighted means).
@@ -196,6 +263,23 @@ fn counted(rows: &[Option<Rows>], a: &[f64]) -> Vec<usize> {
                     .filter(|&&u| u != u32::MAX && a[u as usize].is_finite())
                     .count()
             })
+        })
+        .collect()
+}
+
+/// Each frame's mean robust cost over its rows with an albedo (`None`: no such row).
+fn per_frame_costs(rows: &[Option<Rows>], a: &[f64], k: f64) -> Vec<Option<f64>> {
+    rows.iter()
+        .map(|r| {
+            let r = r.as_ref()?;
+            let (mut cost, mut count) = (0.0, 0usize);
+            for (row, &u) in r.rows.iter().zip(&r.unknown) {
+                if u != u32::MAX && a[u as usize].is_finite() {
+                    cost += huber(row.residual(a[u as usize]), k).0;
+                    count += 1;
+                }
+            }
+            (count > 0).then(|| cost / count as f64)
         })
         .collect()
 }
@@ -348,12 +432,15 @@ pub fn refine_jointly(
         .collect();
     let k = reg.opts.huber;
     let px = reg.model.parts.camera.fx / f64::from(1u32 << opts.level);
-    let start = poses;
     let mut poses = poses.to_vec();
     let mut log_k = vec![0.0; n];
     let mut costs = Vec::new();
-    for _ in 0..opts.renders {
-        let snaps: Vec<Option<Snapshot>> = (0..n)
+    let mut shifted = Vec::new();
+    let mut frame_costs = vec![None; n];
+    // Where the hold on the mean shift along the view holds it: the poses the search leaves.
+    let mut start = poses.clone();
+    for render in 0..opts.renders {
+        let mut snaps: Vec<Option<Snapshot>> = (0..n)
             .into_par_iter()
             .map(|f| {
                 let pyr = pyramids[f].as_ref()?;
@@ -362,54 +449,13 @@ pub fn refine_jointly(
                     .ok()
             })
             .collect();
-        // Cells (numbered in the order the frames' points first meet them, so that the
-        // sums run in the same order on every run), and how many frames see each.
-        let mut cells: HashMap<u64, u32> = HashMap::new();
-        let mut seeing: Vec<(usize, u32)> = Vec::new();
-        let keys: Vec<Vec<u64>> = snaps
-            .iter()
-            .map(|s| {
-                s.as_ref().map_or(Vec::new(), |s| {
-                    s.prob
-                        .points
-                        .iter()
-                        .map(|q| cell_key(&q.x, opts.cell_mm))
-                        .collect()
-                })
-            })
-            .collect();
-        let point_cell: Vec<Vec<u32>> = keys
-            .iter()
-            .enumerate()
-            .map(|(f, ks)| {
-                ks.iter()
-                    .map(|&key| {
-                        let id = *cells.entry(key).or_insert_with(|| {
-                            seeing.push((usize::MAX, 0));
-                            seeing.len() as u32 - 1
-                        });
-                        let c = &mut seeing[id as usize];
-                        if c.0 != f {
-                            *c = (f, c.1 + 1);
-                        }
-                        id
-                    })
-                    .collect()
-            })
-            .collect();
-        let mut index = vec![u32::MAX; seeing.len()];
-        let mut kept = 0u32;
-        for (i, &(_, frames_seeing)) in seeing.iter().enumerate() {
-            if frames_seeing as usize >= opts.min_frames {
-                index[i] = kept;
-                kept += 1;
-            }
+        if let (0, Some(search)) = (render, &opts.shift_search) {
+            shifted = search_run_shifts(
+                reg, &pyramids, &floors, &mut poses, &log_k, roles, &mut snaps, opts, search,
+            );
+            start.clone_from(&poses);
         }
-        let point_cell: Vec<Vec<u32>> = point_cell
-            .iter()
-            .map(|ids| ids.iter().map(|&id| index[id as usize]).collect())
-            .collect();
-        let unknowns = 3 * kept as usize;
+        let (point_cell, unknowns) = number_cells(&snaps, opts);
         let median_depth: Vec<f64> = snaps
             .iter()
             .map(|s| s.as_ref().map_or(1.0, |s| s.median_depth))
@@ -427,7 +473,7 @@ pub fn refine_jointly(
         // curvature there at the first step (`None` until then, and without the hold).
         let mut hold: Option<f64> = None;
         let held = |hold: Option<f64>, p: &[Affine]| {
-            hold.map_or(0.0, |w| 0.5 * w * view_shift_sum(start, p, &free).powi(2))
+            hold.map_or(0.0, |w| 0.5 * w * view_shift_sum(&start, p, &free).powi(2))
         };
         let mut lambda = 1e-4;
         for _ in 0..opts.steps {
@@ -439,7 +485,7 @@ pub fn refine_jointly(
                 cost += held(hold, &poses);
             }
             if let Some(w) = hold {
-                let sum = view_shift_sum(start, &poses, &free);
+                let sum = view_shift_sum(&start, &poses, &free);
                 for &f in &free {
                     for &fg in &free {
                         h[(P * f + 2, P * fg + 2)] += w;
@@ -499,13 +545,19 @@ pub fn refine_jointly(
                 break;
             }
         }
+        frame_costs = per_frame_costs(&rows, &a, k);
         let end_cost = (cost - held(hold, &poses)) / count.max(1) as f64;
         costs.push((start_cost, end_cost));
         if let Some(p) = &opts.progress {
             p.inc(1);
         }
     }
-    Ok(JointResult { poses, costs })
+    Ok(JointResult {
+        poses,
+        costs,
+        shifted,
+        frame_costs,
+    })
 }
 
 /// The roles of each solve over consecutive windows of `window` of the frames `roles`

@@ -16,6 +16,7 @@ pub mod chroma;
 pub mod consensus;
 pub mod frame;
 pub mod joint;
+pub mod joint_shift;
 pub mod level;
 pub mod light;
 pub mod photometric;
