@@ -221,10 +221,19 @@ fn build_refines_tracker_poses_and_leaves_a_wrong_one_out() {
         .expect("model.json records the registration");
     assert_eq!(reg.frames.len(), 24);
     assert_eq!(reg.rounds.len(), 2);
-    // After the rounds, the frames they ran on refined at once (those they flagged not).
+    // After the rounds, the frames they ran on refined at once (those they flagged not, but
+    // for a frame flagged for its cost alone, which is taken back if it now fits).
     let joint = reg.joint.as_ref().expect("the joint stage ran");
     let last = reg.rounds.last().unwrap();
-    assert_eq!(joint.counts, last.counts);
+    let total = |c: &std::collections::BTreeMap<String, usize>| c.values().sum::<usize>();
+    assert_eq!(total(&joint.counts), total(&last.counts));
+    let fitting = |c: &std::collections::BTreeMap<String, usize>| {
+        c.get("converged").copied().unwrap_or(0) + c.get("not_converged").copied().unwrap_or(0)
+    };
+    assert!(
+        fitting(&joint.counts) >= fitting(&last.counts),
+        "{joint:?} {last:?}"
+    );
     assert!(
         joint.median_step_mm > 0.0 && joint.median_step_mm < 0.5,
         "{joint:?}"

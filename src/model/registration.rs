@@ -35,8 +35,9 @@ pub struct RoundSummary {
     pub median_step_deg: f64,
     /// Frames per status at the end of the round.
     pub counts: std::collections::BTreeMap<String, usize>,
-    /// Frames moved as part of a run registered one airway ring away from its neighbours
-    /// (`registration::blocks`).
+    /// Frames moved as part of a run registered away from its neighbours: a run one airway
+    /// ring off, registered again in a round (`registration::blocks`), or a run the joint
+    /// stage's search moved along its views (`registration::joint_shift`).
     #[serde(default)]
     pub realigned: usize,
     /// Wall time of the round (s): light, texture and registration.
