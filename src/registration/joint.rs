@@ -149,10 +149,7 @@ fn rows_at(
 /// The albedo cells of the points `snaps` render: per frame and point, the cell's number
 /// (`u32::MAX` for a point in a cell fewer than `opts.min_frames` frames see), and the number
 /// of albedo unknowns (three channels a cell).
-pub(super) fn number_cells(
-    snaps: &[Option<Snapshot>],
-    opts: &JointOptions,
-) -> (Vec<Vec<u32>>, usize) {
+fn number_cells(snaps: &[Option<Snapshot>], opts: &JointOptions) -> (Vec<Vec<u32>>, usize) {
     // Cells (numbered in the order the frames' points first meet them, so that the
     // sums run in the same order on every run), and how many frames see each.
     let mut cells: HashMap<u64, u32> = HashMap::new();

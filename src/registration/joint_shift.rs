@@ -66,7 +66,7 @@ pub struct RunShift {
 
 /// The runs of `run` consecutive refined frames (by `roles`), each starting half a run after
 /// the one before; the last ends at the last refined frame.
-pub fn shift_runs(roles: &[JointRole], run: usize) -> Vec<Vec<usize>> {
+fn shift_runs(roles: &[JointRole], run: usize) -> Vec<Vec<usize>> {
     let refined: Vec<usize> = (0..roles.len())
         .filter(|&f| roles[f] == JointRole::Refined)
         .collect();
@@ -133,7 +133,7 @@ fn keyed_rows(
 }
 
 /// Robust cost and number of the rows of one cell that take part in the reduced cost, as
-/// [`reduced_mean_cost`] counts them: none unless `min_frames` frames see the cell, and per
+/// [`super::joint::refine_jointly`] counts them: none unless `min_frames` frames see the cell, and per
 /// channel the Huber-reweighted albedo (`reweightings` passes).
 fn cell_cost(rows: &[CostRow], min_frames: usize, k: f64, reweightings: usize) -> (f64, usize) {
     let mut frames = 0;
@@ -416,6 +416,7 @@ pub(super) fn search_run_shifts<'p>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rng::SplitMix64 as Rng;
     use JointRole::{Anchor as A, Refined as R, Skipped as S};
 
     #[test]
@@ -429,6 +430,77 @@ mod tests {
         // Fewer refined frames than a run: one run of them all.
         assert_eq!(shift_runs(&[R, S, R], 4), vec![vec![0, 2]]);
         assert!(shift_runs(&[A, S], 4).is_empty());
+    }
+
+    /// Random rows of `frames` frames over `cells` cells, three channels.
+    fn random_rows(frames: usize, cells: u64, rng: &mut Rng) -> Vec<Vec<(u64, CostRow)>> {
+        (0..frames)
+            .map(|f| {
+                (0..60)
+                    .map(|i| {
+                        let row = CostRow {
+                            frame: f as u32,
+                            channel: (i % 3) as u8,
+                            obs: rng.range_f32(0.2, 1.2),
+                            per_albedo: rng.range_f32(0.3, 1.0),
+                            fixed: rng.range_f32(0.0, 0.1),
+                        };
+                        ((rng.next_u64() % cells) + 100 * (f as u64 % 2), row)
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The cost of a run moved, summed again over the cells it touches only, equals the cost
+    /// summed over every cell with the run's rows replaced.
+    #[test]
+    fn a_runs_cost_summed_over_its_cells_equals_the_whole_sum() {
+        let mut rng = Rng::new(11);
+        let opts = JointOptions::default();
+        let k = 0.05;
+        let rows = random_rows(8, 40, &mut rng);
+        let mut cells = CellRows::new(rows.clone(), &opts, k);
+        let run = vec![3usize, 4, 5];
+        let mut moved = random_rows(8, 70, &mut rng);
+        for (f, r) in moved.iter_mut().enumerate() {
+            for (key, row) in r.iter_mut() {
+                row.frame = f as u32;
+                *key += 17;
+            }
+        }
+        let moved: Vec<Vec<(u64, CostRow)>> = run.iter().map(|&f| moved[f].clone()).collect();
+        let here = cells.rows_of(&run);
+        let there = group(moved.iter().flatten().copied());
+        let mut keys: Vec<u64> = here.keys().chain(there.keys()).copied().collect();
+        keys.sort_unstable();
+        keys.dedup();
+        let (c0, n0) = cells.touched(&keys, &run, &here, &opts, k);
+        let (c1, n1) = cells.touched(&keys, &run, &there, &opts, k);
+        let (cost, count) = (cells.cost - c0 + c1, cells.count + n1 - n0);
+
+        let mut all = rows;
+        for (&f, r) in run.iter().zip(&moved) {
+            all[f] = r.clone();
+        }
+        let whole = CellRows::new(all, &opts, k);
+        assert_eq!(count, whole.count);
+        assert!(
+            (cost - whole.cost).abs() < 1e-9 * whole.cost,
+            "{cost} {}",
+            whole.cost
+        );
+        // Some rows exceed the Huber threshold, and some cells are seen by one frame only.
+        assert!(c0 > 0.0 && n0 > 0 && whole.count < 8 * 60);
+
+        // Replacing the rows in place gives the same sums.
+        for (&f, r) in run.iter().zip(moved) {
+            cells.replace(f, r);
+        }
+        let keys: Vec<u64> = cells.by_key.keys().copied().collect();
+        let (c, n) = cells.touched(&keys, &[], &HashMap::new(), &opts, k);
+        assert_eq!(n, whole.count);
+        assert!((c - whole.cost).abs() < 1e-9 * whole.cost);
     }
 
     #[test]
