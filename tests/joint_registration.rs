@@ -5,6 +5,7 @@
 //! not moved, and an anchor is held. What the stage gains on the demo's denser 320-pixel
 //! video after the rounds is measured in BENCHMARKS.md (session 38).
 
+use bronchosim::image::Frame;
 use bronchosim::io::case::Case;
 use bronchosim::math::Affine;
 use bronchosim::model::Model;
@@ -13,7 +14,7 @@ use bronchosim::registration::joint::{refine_jointly, JointOptions, JointRole};
 use bronchosim::registration::joint_shift::ShiftSearch;
 use bronchosim::registration::pose::perturb;
 use bronchosim::registration::{FrameRegistrar, RegistrationOptions};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 #[path = "common/registration_model.rs"]
 mod registration_model;
@@ -26,10 +27,9 @@ fn build_with(case: &Path, poses: &[Affine], dir: &Path) -> Model {
     build(&dir.join("case"), &dir.join("model"))
 }
 
-#[test]
-fn a_smooth_error_shrinks_and_true_poses_stay() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
+/// The tests' small phantom (24 frames of 160 x 160) written under `dir`: its folder, true
+/// poses and frames.
+fn small_phantom(dir: &Path) -> (PathBuf, Vec<Affine>, Vec<Frame>) {
     let case_dir = dir.join("phantom");
     write_phantom_case(
         &case_dir,
@@ -42,8 +42,35 @@ fn a_smooth_error_shrinks_and_true_poses_stay() {
     )
     .unwrap();
     let case = Case::open(&case_dir).unwrap();
-    let truth: Vec<Affine> = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
-    let frames: Vec<_> = case.frame_source().unwrap().map(|f| f.unwrap()).collect();
+    let truth = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
+    let frames = case.frame_source().unwrap().map(|f| f.unwrap()).collect();
+    (case_dir, truth, frames)
+}
+
+/// A registrar against `model`'s geometry and light alone (no texture), at full resolution,
+/// and the model's gains.
+fn geometry_registrar(model: &Model) -> (FrameRegistrar<'_>, Vec<f64>) {
+    let parts = model.registration_parts().unwrap();
+    let gains = parts.light.gains.clone();
+    let reg = FrameRegistrar::new(
+        bronchosim::registration::ModelParts {
+            texture: None,
+            ..parts
+        },
+        RegistrationOptions {
+            coarsest_level: 0,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    (reg, gains)
+}
+
+#[test]
+fn a_smooth_error_shrinks_and_true_poses_stay() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (case_dir, truth, frames) = small_phantom(dir);
     let n = frames.len();
     // An error that turns and shifts the camera smoothly along the video (zero on average:
     // what the whole video shares no video can see), in each camera's own axes.
@@ -59,23 +86,10 @@ fn a_smooth_error_shrinks_and_true_poses_stay() {
     let (mm0, deg0, _) = errors(&drifted, &truth);
     assert!(mm0 > 0.1 && deg0 > 0.35, "{mm0} mm {deg0} deg");
 
-    // The model's geometry and light (the texture is not used).
+    // All frames at once, the albedo eliminated: the geometry and light of a model built
+    // with the drifted poses (its texture is not used).
     let model = build_with(&case_dir, &drifted, &dir.join("drifted"));
-    let parts = model.registration_parts().unwrap();
-    let gains = parts.light.gains.clone();
-
-    // All frames at once, the albedo eliminated: the same model's geometry and light only.
-    let reg = FrameRegistrar::new(
-        bronchosim::registration::ModelParts {
-            texture: None,
-            ..parts
-        },
-        RegistrationOptions {
-            coarsest_level: 0,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let (reg, gains) = geometry_registrar(&model);
     let refined = refine_jointly(
         &reg,
         &frames,
@@ -135,35 +149,10 @@ fn a_smooth_error_shrinks_and_true_poses_stay() {
 fn a_run_settled_along_its_views_is_found_and_moved_back() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let case_dir = dir.join("phantom");
-    write_phantom_case(
-        &case_dir,
-        &PhantomOptions {
-            frames: 24,
-            width: 160,
-            height: 160,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let case = Case::open(&case_dir).unwrap();
-    let truth: Vec<Affine> = case.poses.iter().map(|p| p.pose.camera_to_world).collect();
-    let frames: Vec<_> = case.frame_source().unwrap().map(|f| f.unwrap()).collect();
+    let (case_dir, truth, frames) = small_phantom(dir);
     let n = frames.len();
     let model = build_with(&case_dir, &truth, &dir.join("true"));
-    let parts = model.registration_parts().unwrap();
-    let gains = parts.light.gains.clone();
-    let reg = FrameRegistrar::new(
-        bronchosim::registration::ModelParts {
-            texture: None,
-            ..parts
-        },
-        RegistrationOptions {
-            coarsest_level: 0,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let (reg, gains) = geometry_registrar(&model);
     let run: Vec<usize> = (n - 6..n).collect();
     let mut ahead = truth.clone();
     for &f in &run {
