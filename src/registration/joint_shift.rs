@@ -202,7 +202,9 @@ impl CellRows {
             cost: 0.0,
             count: 0,
         };
-        let keys: Vec<u64> = cells.by_key.keys().copied().collect();
+        // In key order, not the hash map's: the same sum in the same order on every run.
+        let mut keys: Vec<u64> = cells.by_key.keys().copied().collect();
+        keys.sort_unstable();
         (cells.cost, cells.count) = cells.touched(&keys, &[], &HashMap::new(), opts, k);
         cells
     }
@@ -283,9 +285,9 @@ struct Candidate<'p> {
     rows: Vec<Vec<(u64, CostRow)>>,
 }
 
-/// Try each run of [`shift_runs`] at each shift of `search`, the other frames where they are,
-/// and keep the shifts that lower the mean reduced cost (runs in video order, each against the
-/// poses the runs before it left). `snaps` are the frames' renders at `poses` (replaced for
+/// Move each run of [`shift_runs`] along its views in steps of `search` while the mean reduced
+/// cost falls, the other frames where they are (runs in video order, each against the poses
+/// the runs before it left; see the module docs). `snaps` are the frames' renders at `poses` (replaced for
 /// the frames moved); `pyramids` and `floors` as [`super::joint::refine_jointly`] makes them.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn search_run_shifts<'p>(
