@@ -542,7 +542,9 @@ pub fn refine_jointly(
                 break;
             }
         }
-        frame_costs = per_frame_costs(&rows, &a, k);
+        if render + 1 == opts.renders {
+            frame_costs = per_frame_costs(&rows, &a, k);
+        }
         let end_cost = (cost - held(hold, &poses)) / count.max(1) as f64;
         costs.push((start_cost, end_cost));
         if let Some(p) = &opts.progress {
