@@ -5,7 +5,7 @@
 //! ```sh
 //! cargo run --release --example joint_refine -- CASE WORK start=DIR [levels=1,0] [renders=3]
 //!     [steps=4] [cell=0.25] [trust=1] [minframes=2] [gain=yes|no] [hold=yes|no]
-//!     [final=yes|no] [search=yes|no] [run=6] [gainmin=0.005]
+//!     [final=yes|no] [search=yes|no] [run=6] [gainmin=0.005] [jitter=yes|no]
 //! ```
 //! `start=DIR` reads `DIR/poses.json` (e.g. a model built with registration). WORK receives
 //! `start/case` and `start/model` (built with those poses, every frame, no hold-out), and
@@ -35,6 +35,7 @@ fn main() -> anyhow::Result<()> {
     let mut opts = JointOptions::default();
     let mut final_model = true;
     let mut search: Option<ShiftSearch> = None;
+    let mut reg_opts = RegistrationOptions::default();
     for kv in &args[2..] {
         match kv.split_once('=') {
             Some(("start", v)) => start = Some(PathBuf::from(v)),
@@ -47,6 +48,7 @@ fn main() -> anyhow::Result<()> {
             Some(("trust", v)) => opts.trust_px = v.parse()?,
             Some(("minframes", v)) => opts.min_frames = v.parse()?,
             Some(("final", v)) => final_model = v == "yes",
+            Some(("jitter", v)) => reg_opts.ray_jitter = v == "yes",
             Some(("gain", v)) => opts.estimate_gain = v == "yes",
             Some(("hold", v)) => opts.hold_mean_view_shift = v == "yes",
             Some(("search", v)) => search = (v == "yes").then(ShiftSearch::default),
@@ -85,7 +87,7 @@ fn main() -> anyhow::Result<()> {
     let light = model.calibrated().expect("calibrated light");
     let reg = FrameRegistrar::new(
         model.registration_parts().expect("calibrated light"),
-        RegistrationOptions::default(),
+        reg_opts,
     )?;
     let mut current = poses;
     for &level in &levels {

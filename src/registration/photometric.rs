@@ -46,6 +46,12 @@ pub struct RayGrid {
 impl RayGrid {
     /// The grid of `camera` at `level` with `stride`.
     pub fn new(camera: &Camera, level: usize, stride: usize) -> RayGrid {
+        Self::with_jitter(camera, level, stride, false)
+    }
+
+    /// [`RayGrid::new`], each ray moved off its pixel centre by a fixed pseudo-random
+    /// sub-pixel offset (up to half a pixel each way) when `jitter`.
+    pub fn with_jitter(camera: &Camera, level: usize, stride: usize, jitter: bool) -> RayGrid {
         let cam = camera.at_level(level);
         let stride = stride.max(1);
         let (gw, gh) = (
@@ -56,7 +62,12 @@ impl RayGrid {
         let mut pixel_angle = Vec::with_capacity(gw * gh);
         for gy in 0..gh {
             for gx in 0..gw {
-                let (x, y) = ((gx * stride) as f64, (gy * stride) as f64);
+                let (jx, jy) = if jitter {
+                    sub_pixel_offset(gx, gy, level)
+                } else {
+                    (0.0, 0.0)
+                };
+                let (x, y) = ((gx * stride) as f64 + jx, (gy * stride) as f64 + jy);
                 let d = cam.pixel_ray(x, y);
                 let dx = cam.pixel_ray(x + 1.0, y);
                 let dy = cam.pixel_ray(x, y + 1.0);
@@ -76,6 +87,18 @@ impl RayGrid {
             pixel_angle,
         }
     }
+}
+
+/// A fixed pseudo-random offset in [-0.5, 0.5) pixels on each axis for grid ray (gx, gy)
+/// of `level` (splitmix64 of the three).
+fn sub_pixel_offset(gx: usize, gy: usize, level: usize) -> (f64, f64) {
+    let mut z = (gx as u64) ^ ((gy as u64) << 24) ^ ((level as u64) << 48);
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^= z >> 31;
+    let unit = |bits: u64| (bits & 0xff_ffff) as f64 / f64::from(1u32 << 24) - 0.5;
+    (unit(z), unit(z >> 32))
 }
 
 /// A built model ready for registration.
@@ -209,5 +232,58 @@ impl PhotometricModel<'_> {
             hit_fraction: hits as f64 / n,
             inside_fraction: inside as f64 / hits.max(1) as f64,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point3;
+
+    #[test]
+    fn jittered_rays_stay_within_half_a_pixel_of_their_grid_pixel() {
+        let camera = Camera {
+            width: 96,
+            height: 80,
+            fx: 70.0,
+            fy: 70.0,
+            cx: 47.5,
+            cy: 39.5,
+            k1: -0.2,
+            k2: 0.05,
+            p1: 0.001,
+            p2: -0.001,
+            k3: 0.0,
+        };
+        let (level, stride) = (1, 2);
+        let cam = camera.at_level(level);
+        let plain = RayGrid::new(&camera, level, stride);
+        let jittered = RayGrid::with_jitter(&camera, level, stride, true);
+        assert_eq!(plain.rays.dirs.len(), jittered.rays.dirs.len());
+        let width = plain.rays.width as usize;
+        let mut offsets = Vec::new();
+        for (i, d) in jittered.rays.dirs.iter().enumerate() {
+            let p = Point3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2]));
+            let px = cam.project(&p).unwrap();
+            let (gx, gy) = ((i % width * stride) as f64, (i / width * stride) as f64);
+            let (ox, oy) = (px.x - gx, px.y - gy);
+            assert!(
+                ox.abs() <= 0.5 + 1e-4 && oy.abs() <= 0.5 + 1e-4,
+                "{ox} {oy}"
+            );
+            offsets.push((ox, oy));
+        }
+        // Spread over the pixel, not at its centre: uniform on [-0.5, 0.5) has mean 0 and
+        // mean |offset| 0.25.
+        let count = offsets.len() as f64;
+        let mean = offsets.iter().map(|o| o.0 + o.1).sum::<f64>() / (2.0 * count);
+        let mean_abs = offsets.iter().map(|o| o.0.abs() + o.1.abs()).sum::<f64>() / (2.0 * count);
+        assert!(mean.abs() < 0.03, "{mean}");
+        assert!((mean_abs - 0.25).abs() < 0.03, "{mean_abs}");
+        // The same offsets every time (runs are reproducible), none without them.
+        let again = RayGrid::with_jitter(&camera, level, stride, true);
+        assert_eq!(again.rays.dirs, jittered.rays.dirs);
+        let unjittered = RayGrid::with_jitter(&camera, level, stride, false);
+        assert_eq!(unjittered.rays.dirs, plain.rays.dirs);
     }
 }

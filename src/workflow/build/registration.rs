@@ -654,6 +654,13 @@ const LATER_TEXTURE_FROM_ROUND: usize = 2;
 /// levels 2, 1, 0 32.74 dB; BENCHMARKS.md, session 38).
 const JOINT_LEVELS: [usize; 2] = [1, 0];
 
+/// Renders per level of the joint stage. Its cost is consistent from one render to the next
+/// once the points are off the pixel centres ([`RegistrationOptions::ray_jitter`]), so a
+/// further render keeps lowering it: demo phantom, 3 mm / 4 deg tracker, new views 31.27 /
+/// 31.56 / 31.64 / 31.70 dB with 3 / 4 / 5 / 6 renders, each render about 5 s of the build
+/// (BENCHMARKS.md, session 40).
+const JOINT_RENDERS: usize = 4;
+
 /// Most frames the joint stage refines in one solve. Its normal equations are dense, seven
 /// unknowns a frame (200 frames: 1400 x 1400, 16 MB, and a cell seen by k frames adds k^2
 /// blocks): a longer video (`--max-frames` above the default) is refined in consecutive
@@ -703,11 +710,17 @@ fn joint_stage(
         RegistrationOptions {
             coarsest_level: levels[0],
             finest_level: 0,
+            // The points held between renders are then sampled between pixels as they are
+            // after a render, not at its pixel centres (see `ray_jitter`).
+            ray_jitter: true,
             ..RegistrationOptions::default()
         },
     )?;
     let windows = joint_windows(&roles, JOINT_WINDOW, JOINT_WINDOW_ANCHORS);
-    let joint = JointOptions::default();
+    let joint = JointOptions {
+        renders: JOINT_RENDERS,
+        ..JointOptions::default()
+    };
     let progress = Progress::new(
         "register (all frames at once)",
         (windows.len() * levels.len() * joint.renders) as u64,
