@@ -47,6 +47,15 @@ fn small_phantom(dir: &Path) -> (PathBuf, Vec<Affine>, Vec<Frame>) {
     (case_dir, truth, frames)
 }
 
+/// The small phantom (in a folder that lives as long as the first value), its true poses and
+/// frames, and a model built with those poses.
+fn small_phantom_true_model() -> (tempfile::TempDir, Vec<Affine>, Vec<Frame>, Model) {
+    let tmp = tempfile::tempdir().unwrap();
+    let (case_dir, truth, frames) = small_phantom(tmp.path());
+    let model = build_with(&case_dir, &truth, &tmp.path().join("true"));
+    (tmp, truth, frames, model)
+}
+
 /// A registrar against `model`'s geometry and light alone (no texture), at full resolution,
 /// and the model's gains.
 fn geometry_registrar(model: &Model) -> (FrameRegistrar<'_>, Vec<f64>) {
@@ -154,11 +163,8 @@ fn a_smooth_error_shrinks_and_true_poses_stay() {
 /// noisy: the held cost falls for a move of no use and the next render takes it back.
 #[test]
 fn held_cost_is_the_next_renders_cost_with_points_off_pixel_centres() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
-    let (case_dir, truth, frames) = small_phantom(dir);
+    let (_tmp, truth, frames, model) = small_phantom_true_model();
     let n = frames.len();
-    let model = build_with(&case_dir, &truth, &dir.join("true"));
     // The fall the held points promise over a render's steps that the next render keeps.
     let kept_share = |ray_jitter: bool| {
         let (reg, gains) = geometry_registrar_with(&model, ray_jitter);
@@ -192,11 +198,8 @@ fn held_cost_is_the_next_renders_cost_with_points_off_pixel_centres() {
 /// and moved back by the search before them; from true poses the search moves nothing.
 #[test]
 fn a_run_settled_along_its_views_is_found_and_moved_back() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path();
-    let (case_dir, truth, frames) = small_phantom(dir);
+    let (_tmp, truth, frames, model) = small_phantom_true_model();
     let n = frames.len();
-    let model = build_with(&case_dir, &truth, &dir.join("true"));
     let (reg, gains) = geometry_registrar(&model);
     let run: Vec<usize> = (n - 6..n).collect();
     let mut ahead = truth.clone();
