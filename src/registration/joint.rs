@@ -97,8 +97,8 @@ const HOLD_STIFFNESS: f64 = 100.0;
 /// Damping values tried per step (each four times the last) before the step is given up and
 /// the render ends. A try costs a pass over every row, and at convergence the damping used to
 /// climb from 1e-7 to 1e6, 22 tries, in every render: with 4 renders per level the stage took
-/// 26.5 s of the demo build, 21.0 s with 6 tries (3 mm / 4 deg: new views 31.56 and 31.59 dB;
-/// BENCHMARKS.md, session 40).
+/// 26.5 s of the demo build, 21-23 s with 6 tries (3 mm / 4 deg: new views 31.56 and 31.59
+/// dB; BENCHMARKS.md, session 40).
 const STEP_TRIES: usize = 6;
 
 /// The shift along each camera's view axis from `start` to `poses`, summed over `frames`.

@@ -657,7 +657,8 @@ const JOINT_LEVELS: [usize; 2] = [1, 0];
 /// Renders per level of the joint stage. Its cost is consistent from one render to the next
 /// once the points are off the pixel centres ([`RegistrationOptions::ray_jitter`]), so a
 /// further render keeps lowering it: demo phantom, 3 mm / 4 deg tracker, new views 31.27 /
-/// 31.56 / 31.64 / 31.70 dB with 3 / 4 / 5 / 6 renders, each render about 5 s of the build
+/// 31.56 / 31.64 / 31.70 dB with 3 / 4 / 5 / 6 renders; one more render on each level adds
+/// about 5 s to the demo build, whose registration is near the 60 s issue 16 allows it
 /// (BENCHMARKS.md, session 40).
 const JOINT_RENDERS: usize = 4;
 
@@ -710,8 +711,8 @@ fn joint_stage(
         RegistrationOptions {
             coarsest_level: levels[0],
             finest_level: 0,
-            // The points held between renders are then sampled between pixels as they are
-            // after a render, not at its pixel centres (see `ray_jitter`).
+            // Points off the pixel centres: the cost the solve lowers on the points held
+            // between renders is then the cost the next render finds (see `ray_jitter`).
             ray_jitter: true,
             ..RegistrationOptions::default()
         },
