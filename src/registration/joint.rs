@@ -153,6 +153,22 @@ fn rows_at(
         .collect()
 }
 
+/// The model's points for frame pyramid `pyr` rendered at `pose` (gain `log_k`, noise
+/// floor `floor`) at `level`, or the pyramid's coarsest level when it has fewer; `None` for a
+/// frame without a pyramid (skipped) or a render that fails.
+pub(super) fn render_frame<'p>(
+    reg: &'p FrameRegistrar,
+    pyr: &'p Option<ObservedPyramid>,
+    floor: f64,
+    level: usize,
+    pose: &Affine,
+    log_k: f64,
+) -> Option<Snapshot<'p>> {
+    let pyr = pyr.as_ref()?;
+    let level = level.min(pyr.levels.len() - 1);
+    reg.snapshot(pyr, level, pose, log_k, floor).ok()
+}
+
 /// The albedo cells of the points `snaps` render: per frame and point, the cell's number
 /// (`u32::MAX` for a point in a cell fewer than `opts.min_frames` frames see), and the number
 /// of albedo unknowns (three channels a cell).
@@ -447,10 +463,14 @@ pub fn refine_jointly(
         let mut snaps: Vec<Option<Snapshot>> = (0..n)
             .into_par_iter()
             .map(|f| {
-                let pyr = pyramids[f].as_ref()?;
-                let level = opts.level.min(pyr.levels.len() - 1);
-                reg.snapshot(pyr, level, &poses[f], log_k[f], floors[f])
-                    .ok()
+                render_frame(
+                    reg,
+                    &pyramids[f],
+                    floors[f],
+                    opts.level,
+                    &poses[f],
+                    log_k[f],
+                )
             })
             .collect();
         if let (0, Some(search)) = (render, &opts.shift_search) {

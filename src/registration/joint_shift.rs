@@ -20,7 +20,7 @@
 
 use super::align::huber;
 use super::frame::FrameRegistrar;
-use super::joint::{cell_key, JointOptions, JointRole};
+use super::joint::{cell_key, render_frame, JointOptions, JointRole};
 use super::level::Snapshot;
 use super::pyramid::ObservedPyramid;
 use crate::math::Affine;
@@ -303,9 +303,7 @@ pub(super) fn search_run_shifts<'p>(
 ) -> Vec<RunShift> {
     let k = reg.opts.huber;
     let render = |f: usize, pose: &Affine| -> Option<Snapshot<'p>> {
-        let pyr = pyramids[f].as_ref()?;
-        let level = opts.level.min(pyr.levels.len() - 1);
-        reg.snapshot(pyr, level, pose, log_k[f], floors[f]).ok()
+        render_frame(reg, &pyramids[f], floors[f], opts.level, pose, log_k[f])
     };
     let frame_rows: Vec<Vec<(u64, CostRow)>> = snaps
         .par_iter()
