@@ -115,10 +115,27 @@ fn view_shift_sum(start: &[Affine], poses: &[Affine], frames: &[usize]) -> f64 {
 /// Number of pose and gain parameters per frame.
 const P: usize = 7;
 
-/// One frame's residual rows at some pose, and the unknown (cell x 3 + channel) of each.
+/// One frame's residual rows at some pose, the unknown (cell x 3 + channel) of each, and its
+/// slot: the unknown's rank among the frame's unknowns (those of the cells its render's points
+/// fall in), so that sums per unknown need no hash map and run in increasing unknown order.
 struct Rows {
     rows: Vec<PointRow>,
     unknown: Vec<u32>,
+    slot: Vec<u32>,
+    /// How many unknowns the frame's render reaches (slots run below it).
+    slots: usize,
+}
+
+/// The albedo cells of one render's points, per frame and point.
+struct CellNumbers {
+    /// The cell's number (`u32::MAX`: a cell fewer than `min_frames` frames see).
+    cell: Vec<Vec<u32>>,
+    /// The cell's rank among the frame's cells in increasing number (`u32::MAX`: none).
+    rank: Vec<Vec<u32>>,
+    /// Per frame, how many cells its points fall in.
+    frame_cells: Vec<usize>,
+    /// Albedo unknowns (three channels a cell).
+    unknowns: usize,
 }
 
 /// Cell key of a world point.
@@ -127,11 +144,11 @@ pub(super) fn cell_key(x: &crate::math::Vector3<f64>, edge: f64) -> u64 {
     q(x.x) | q(x.y) << 21 | q(x.z) << 42
 }
 
-/// The rows of every frame with a render, at `poses` / `log_k`, their unknowns from
-/// `point_cell` (per frame, per point; `u32::MAX` for none).
+/// The rows of every frame with a render, at `poses` / `log_k`, their unknowns and slots from
+/// `cells`.
 fn rows_at(
     snaps: &[Option<Snapshot>],
-    point_cell: &[Vec<u32>],
+    cells: &CellNumbers,
     poses: &[Affine],
     log_k: &[f64],
 ) -> Vec<Option<Rows>> {
@@ -141,14 +158,18 @@ fn rows_at(
         .map(|(f, s)| {
             let s = s.as_ref()?;
             let rows = s.prob.point_rows(&poses[f], log_k[f]);
-            let unknown = rows
-                .iter()
-                .map(|r| match point_cell[f][r.point as usize] {
-                    u32::MAX => u32::MAX,
-                    c => c * 3 + u32::from(r.channel),
-                })
-                .collect();
-            Some(Rows { rows, unknown })
+            let of = |numbers: &[u32], r: &PointRow| match numbers[r.point as usize] {
+                u32::MAX => u32::MAX,
+                c => c * 3 + u32::from(r.channel),
+            };
+            let unknown = rows.iter().map(|r| of(&cells.cell[f], r)).collect();
+            let slot = rows.iter().map(|r| of(&cells.rank[f], r)).collect();
+            Some(Rows {
+                rows,
+                unknown,
+                slot,
+                slots: 3 * cells.frame_cells[f],
+            })
         })
         .collect()
 }
@@ -169,10 +190,8 @@ pub(super) fn render_frame<'p>(
     reg.snapshot(pyr, level, pose, log_k, floor).ok()
 }
 
-/// The albedo cells of the points `snaps` render: per frame and point, the cell's number
-/// (`u32::MAX` for a point in a cell fewer than `opts.min_frames` frames see), and the number
-/// of albedo unknowns (three channels a cell).
-fn number_cells(snaps: &[Option<Snapshot>], opts: &JointOptions) -> (Vec<Vec<u32>>, usize) {
+/// The albedo cells of the points `snaps` render.
+fn number_cells(snaps: &[Option<Snapshot>], opts: &JointOptions) -> CellNumbers {
     // Cells (numbered in the order the frames' points first meet them, so that the
     // sums run in the same order on every run), and how many frames see each.
     let mut cells: HashMap<u64, u32> = HashMap::new();
@@ -216,11 +235,29 @@ fn number_cells(snaps: &[Option<Snapshot>], opts: &JointOptions) -> (Vec<Vec<u32
             kept += 1;
         }
     }
-    let point_cell: Vec<Vec<u32>> = point_cell
+    let cell: Vec<Vec<u32>> = point_cell
         .iter()
         .map(|ids| ids.iter().map(|&id| index[id as usize]).collect())
         .collect();
-    (point_cell, 3 * kept as usize)
+    let (rank, frame_cells) = cell
+        .par_iter()
+        .map(|numbers| {
+            let mut own: Vec<u32> = numbers.iter().copied().filter(|&c| c != u32::MAX).collect();
+            own.sort_unstable();
+            own.dedup();
+            let rank = numbers
+                .iter()
+                .map(|c| own.binary_search(c).map_or(u32::MAX, |r| r as u32))
+                .collect();
+            (rank, own.len())
+        })
+        .unzip();
+    CellNumbers {
+        cell,
+        rank,
+        frame_cells,
+        unknowns: 3 * kept as usize,
+    }
 }
 
 /// The albedo of every unknown that best explains `rows` (Huber-reweighted means).
@@ -313,12 +350,15 @@ fn reduced_system(
     unknowns: usize,
 ) -> (DMatrix<f64>, DVector<f64>) {
     let n = rows.len();
+    /// One frame's sums over its rows.
     struct FrameSums {
         h: [[f64; P]; P],
         g: [f64; P],
-        /// Per unknown: the coupling `sum w J (-per_albedo)`, `sum w per_albedo^2` and
+        /// Per slot: the coupling `sum w J (-per_albedo)`, `sum w per_albedo^2` and
         /// `sum w (-per_albedo) e`.
-        coupling: HashMap<u32, ([f64; P], f64, f64)>,
+        coupling: Vec<([f64; P], f64, f64)>,
+        /// Per slot, its unknown (`u32::MAX`: no row counted).
+        unknown: Vec<u32>,
     }
     let sums: Vec<Option<FrameSums>> = rows
         .par_iter()
@@ -327,9 +367,10 @@ fn reduced_system(
             let mut s = FrameSums {
                 h: [[0.0; P]; P],
                 g: [0.0; P],
-                coupling: HashMap::new(),
+                coupling: vec![([0.0; P], 0.0, 0.0); r.slots],
+                unknown: vec![u32::MAX; r.slots],
             };
-            for (row, &u) in r.rows.iter().zip(&r.unknown) {
+            for ((row, &u), &slot) in r.rows.iter().zip(&r.unknown).zip(&r.slot) {
                 if u == u32::MAX || !a[u as usize].is_finite() {
                     continue;
                 }
@@ -344,60 +385,112 @@ fn reduced_system(
                     }
                     s.g[i] += w * ji * e;
                 }
-                let c = s.coupling.entry(u).or_insert(([0.0; P], 0.0, 0.0));
+                let c = &mut s.coupling[slot as usize];
                 for (ci, &ji) in c.0.iter_mut().zip(&j) {
                     *ci -= w * ji * pa;
                 }
                 c.1 += w * pa * pa;
                 c.2 -= w * pa * e;
+                s.unknown[slot as usize] = u;
             }
             Some(s)
         })
         .collect();
-    let mut h = DMatrix::zeros(P * n, P * n);
-    let mut g = DVector::zeros(P * n);
+    // Per unknown, its sums over the frames, and the frames that see it (frame and slot, in
+    // frame order) as one list over all unknowns: those of unknown u at seen[start[u]..
+    // start[u + 1]]. `place[f][slot]` is where frame f's slot is in that list.
     let mut haa = vec![0.0; unknowns];
     let mut ga = vec![0.0; unknowns];
-    let mut seen_by: Vec<Vec<(usize, [f64; P])>> = vec![Vec::new(); unknowns];
-    for (f, s) in sums.iter().enumerate() {
-        let Some(s) = s else { continue };
-        for i in 0..P {
-            for l in 0..P {
-                h[(P * f + i, P * f + l)] += s.h[i.min(l)][i.max(l)];
+    let mut start = vec![0usize; unknowns + 1];
+    for s in sums.iter().flatten() {
+        for (&u, &(_, hu, gu)) in s.unknown.iter().zip(&s.coupling) {
+            if u != u32::MAX {
+                haa[u as usize] += hu;
+                ga[u as usize] += gu;
+                start[u as usize + 1] += 1;
             }
-            g[P * f + i] += s.g[i];
-        }
-        for (&u, (c, hu, gu)) in &s.coupling {
-            haa[u as usize] += hu;
-            ga[u as usize] += gu;
-            seen_by[u as usize].push((f, *c));
         }
     }
-    // Each cell couples every pair of frames that see it: whole blocks at (f, g), f <= g (the
-    // lists are in frame order), the lower block triangle mirrored after.
-    for (u, list) in seen_by.iter().enumerate() {
-        if haa[u] <= 0.0 {
-            continue;
-        }
-        let inv = 1.0 / haa[u];
-        for (x, &(f, cf)) in list.iter().enumerate() {
+    for u in 0..unknowns {
+        start[u + 1] += start[u];
+    }
+    let mut seen = vec![(0u32, 0u32); start[unknowns]];
+    let mut next = start.clone();
+    let place: Vec<Vec<usize>> = sums
+        .iter()
+        .enumerate()
+        .map(|(f, s)| {
+            let Some(s) = s else { return Vec::new() };
+            s.unknown
+                .iter()
+                .enumerate()
+                .map(|(slot, &u)| {
+                    if u == u32::MAX {
+                        return usize::MAX;
+                    }
+                    let at = next[u as usize];
+                    seen[at] = (f as u32, slot as u32);
+                    next[u as usize] += 1;
+                    at
+                })
+                .collect()
+        })
+        .collect();
+    // Each cell couples every pair of frames that see it. Frame f's row of blocks, (f, g) for
+    // g >= f, and its gradient are summed by one task, over its unknowns in increasing order
+    // as a loop over all unknowns would; the lower block triangle is mirrored after.
+    let block_rows: Vec<(Vec<[[f64; P]; P]>, [f64; P])> = sums
+        .par_iter()
+        .enumerate()
+        .map(|(f, s)| {
+            let mut blocks = vec![[[0.0; P]; P]; n - f];
+            let Some(s) = s else {
+                return (blocks, [0.0; P]);
+            };
             for i in 0..P {
-                g[P * f + i] -= cf[i] * ga[u] * inv;
+                for l in 0..P {
+                    blocks[0][i][l] = s.h[i.min(l)][i.max(l)];
+                }
             }
-            for &(fg, cg) in &list[x..] {
+            let mut grad = s.g;
+            for (slot, &u) in s.unknown.iter().enumerate() {
+                let u = u as usize;
+                if u == u32::MAX as usize || haa[u] <= 0.0 {
+                    continue;
+                }
+                let inv = 1.0 / haa[u];
+                let cf = &s.coupling[slot].0;
                 for i in 0..P {
-                    for l in 0..P {
-                        h[(P * f + i, P * fg + l)] -= cf[i] * cg[l] * inv;
+                    grad[i] -= cf[i] * ga[u] * inv;
+                }
+                for &(fg, sg) in &seen[place[f][slot]..start[u + 1]] {
+                    let Some(other) = &sums[fg as usize] else {
+                        continue;
+                    };
+                    let cg = &other.coupling[sg as usize].0;
+                    let block = &mut blocks[fg as usize - f];
+                    for i in 0..P {
+                        for l in 0..P {
+                            block[i][l] -= cf[i] * cg[l] * inv;
+                        }
                     }
                 }
             }
+            (blocks, grad)
+        })
+        .collect();
+    let mut h = DMatrix::zeros(P * n, P * n);
+    let mut g = DVector::zeros(P * n);
+    for (f, (blocks, grad)) in block_rows.iter().enumerate() {
+        for i in 0..P {
+            g[P * f + i] = grad[i];
         }
-    }
-    for f in 0..n {
-        for fg in f + 1..n {
+        for (d, block) in blocks.iter().enumerate() {
+            let fg = f + d;
             for i in 0..P {
                 for l in 0..P {
-                    h[(P * fg + l, P * f + i)] = h[(P * f + i, P * fg + l)];
+                    h[(P * f + i, P * fg + l)] = block[i][l];
+                    h[(P * fg + l, P * f + i)] = block[i][l];
                 }
             }
         }
@@ -479,7 +572,8 @@ pub fn refine_jointly(
             );
             start.clone_from(&poses);
         }
-        let (point_cell, unknowns) = number_cells(&snaps, opts);
+        let cells = number_cells(&snaps, opts);
+        let unknowns = cells.unknowns;
         let median_depth: Vec<f64> = snaps
             .iter()
             .map(|s| s.as_ref().map_or(1.0, |s| s.median_depth))
@@ -487,7 +581,7 @@ pub fn refine_jointly(
         let frozen: Vec<bool> = (0..n)
             .map(|f| roles[f] != JointRole::Refined || snaps[f].is_none())
             .collect();
-        let mut rows = rows_at(&snaps, &point_cell, &poses, &log_k);
+        let mut rows = rows_at(&snaps, &cells, &poses, &log_k);
         let mut a = solve_albedo(&rows, unknowns, k, opts.reweightings);
         let expected = counted(&rows, &a);
         let (mut cost, count) = total_cost(&rows, &a, k, &expected);
@@ -556,7 +650,7 @@ pub fn refine_jointly(
                     cand[f] = perturb(&poses[f], &xi);
                     cand_k[f] += s[6] * shrink;
                 }
-                let cand_rows = rows_at(&snaps, &point_cell, &cand, &cand_k);
+                let cand_rows = rows_at(&snaps, &cells, &cand, &cand_k);
                 let cand_a = solve_albedo(&cand_rows, unknowns, k, opts.reweightings);
                 let (c, _) = total_cost(&cand_rows, &cand_a, k, &expected);
                 let c = c + held(hold, &cand);
@@ -656,7 +750,13 @@ mod tests {
                         _ => (i % unknowns) as u32,
                     });
                 }
-                Some(Rows { rows, unknown })
+                let slot = unknown.clone();
+                Some(Rows {
+                    rows,
+                    unknown,
+                    slot,
+                    slots: unknowns,
+                })
             })
             .collect()
     }
