@@ -115,6 +115,9 @@ fn view_shift_sum(start: &[Affine], poses: &[Affine], frames: &[usize]) -> f64 {
 /// Number of pose and gain parameters per frame.
 const P: usize = 7;
 
+/// One pair of frames' block of the normal equations.
+type Block = [[f64; P]; P];
+
 /// One frame's residual rows at some pose, the unknown (cell x 3 + channel) of each, and its
 /// slot: the unknown's rank among the frame's unknowns (those of the cells its render's points
 /// fall in), so that sums per unknown need no hash map and run in increasing unknown order.
@@ -132,8 +135,8 @@ struct CellNumbers {
     cell: Vec<Vec<u32>>,
     /// The cell's rank among the frame's cells in increasing number (`u32::MAX`: none).
     rank: Vec<Vec<u32>>,
-    /// Per frame, how many cells its points fall in.
-    frame_cells: Vec<usize>,
+    /// Per frame, the cells its points fall in, in increasing number.
+    frame_cells: Vec<Vec<u32>>,
     /// Albedo unknowns (three channels a cell).
     unknowns: usize,
 }
@@ -168,7 +171,7 @@ fn rows_at(
                 rows,
                 unknown,
                 slot,
-                slots: 3 * cells.frame_cells[f],
+                slots: 3 * cells.frame_cells[f].len(),
             })
         })
         .collect()
@@ -249,7 +252,7 @@ fn number_cells(snaps: &[Option<Snapshot>], opts: &JointOptions) -> CellNumbers 
                 .iter()
                 .map(|c| own.binary_search(c).map_or(u32::MAX, |r| r as u32))
                 .collect();
-            (rank, own.len())
+            (rank, own)
         })
         .unzip();
     CellNumbers {
@@ -260,30 +263,121 @@ fn number_cells(snaps: &[Option<Snapshot>], opts: &JointOptions) -> CellNumbers 
     }
 }
 
-/// The albedo of every unknown that best explains `rows` (Huber-reweighted means).
-fn solve_albedo(rows: &[Option<Rows>], unknowns: usize, k: f64, reweightings: usize) -> Vec<f64> {
-    let mut a = vec![f64::NAN; unknowns];
+impl CellNumbers {
+    /// Per frame, the unknown of each slot.
+    fn slot_unknowns(&self) -> Vec<Vec<u32>> {
+        self.frame_cells
+            .iter()
+            .map(|cells| {
+                cells
+                    .iter()
+                    .flat_map(|&c| (0..3).map(move |ch| 3 * c + ch))
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+/// Which frames' renders see each albedo unknown: for unknown `u`, (frame, slot) at
+/// `seen[start[u]..start[u + 1]]`, in frame order, and where each frame's slot is there. Sums
+/// per unknown over its frames run in that order: every run adds the same numbers in the same
+/// order, however the frames are shared among threads.
+struct Sightings {
+    start: Vec<usize>,
+    seen: Vec<(u32, u32)>,
+    /// Per frame and slot, its index in `seen`.
+    place: Vec<Vec<usize>>,
+}
+
+impl Sightings {
+    /// From each frame's unknown of each slot.
+    fn new(slot_unknowns: &[Vec<u32>], unknowns: usize) -> Self {
+        let mut start = vec![0usize; unknowns + 1];
+        for &u in slot_unknowns.iter().flatten() {
+            start[u as usize + 1] += 1;
+        }
+        for u in 0..unknowns {
+            start[u + 1] += start[u];
+        }
+        let mut seen = vec![(0u32, 0u32); start[unknowns]];
+        let mut next = start.clone();
+        let place = slot_unknowns
+            .iter()
+            .enumerate()
+            .map(|(f, slots)| {
+                slots
+                    .iter()
+                    .enumerate()
+                    .map(|(slot, &u)| {
+                        let at = next[u as usize];
+                        seen[at] = (f as u32, slot as u32);
+                        next[u as usize] += 1;
+                        at
+                    })
+                    .collect()
+            })
+            .collect();
+        Sightings { start, seen, place }
+    }
+
+    fn unknowns(&self) -> usize {
+        self.start.len() - 1
+    }
+
+    /// The frames (and their slots) that see unknown `u`.
+    fn of(&self, u: usize) -> &[(u32, u32)] {
+        &self.seen[self.start[u]..self.start[u + 1]]
+    }
+
+    /// The frames (and their slots) that see unknown `u` from frame `f` (seeing it in `slot`)
+    /// on.
+    fn from(&self, u: usize, f: usize, slot: usize) -> &[(u32, u32)] {
+        &self.seen[self.place[f][slot]..self.start[u + 1]]
+    }
+}
+
+/// The albedo of every unknown that best explains `rows` (Huber-reweighted means): each
+/// frame's sums per slot, then per unknown over the frames that see it.
+fn solve_albedo(rows: &[Option<Rows>], seen: &Sightings, k: f64, reweightings: usize) -> Vec<f64> {
+    let mut a = vec![f64::NAN; seen.unknowns()];
     for pass in 0..=reweightings {
-        let mut num = vec![0.0; unknowns];
-        let mut den = vec![0.0; unknowns];
-        for r in rows.iter().flatten() {
-            for (row, &u) in r.rows.iter().zip(&r.unknown) {
-                if u == u32::MAX {
-                    continue;
+        let sums: Vec<Vec<(f64, f64)>> = rows
+            .par_iter()
+            .map(|r| {
+                let Some(r) = r else { return Vec::new() };
+                let mut s = vec![(0.0, 0.0); r.slots];
+                for ((row, &u), &slot) in r.rows.iter().zip(&r.unknown).zip(&r.slot) {
+                    if u == u32::MAX {
+                        continue;
+                    }
+                    let (pa, y) = (f64::from(row.per_albedo), row.residual(0.0));
+                    let w = match pass {
+                        0 => 1.0,
+                        _ => huber(y - a[u as usize] * pa, k).1,
+                    };
+                    let s = &mut s[slot as usize];
+                    s.0 += w * pa * y;
+                    s.1 += w * pa * pa;
                 }
-                let u = u as usize;
-                let (pa, y) = (f64::from(row.per_albedo), row.residual(0.0));
-                let w = match pass {
-                    0 => 1.0,
-                    _ => huber(y - a[u] * pa, k).1,
-                };
-                num[u] += w * pa * y;
-                den[u] += w * pa * pa;
-            }
-        }
-        for ((a, n), d) in a.iter_mut().zip(num).zip(den) {
-            *a = if d > 0.0 { n / d } else { f64::NAN };
-        }
+                s
+            })
+            .collect();
+        a = (0..seen.unknowns())
+            .into_par_iter()
+            .map(|u| {
+                let (mut num, mut den) = (0.0, 0.0);
+                for &(f, slot) in seen.of(u) {
+                    let (n, d) = sums[f as usize][slot as usize];
+                    num += n;
+                    den += d;
+                }
+                if den > 0.0 {
+                    num / den
+                } else {
+                    f64::NAN
+                }
+            })
+            .collect();
     }
     a
 }
@@ -292,22 +386,26 @@ fn solve_albedo(rows: &[Option<Rows>], unknowns: usize, k: f64, reweightings: us
 /// charged the Huber threshold's cost; and the number of rows counted.
 fn total_cost(rows: &[Option<Rows>], a: &[f64], k: f64, expected: &[usize]) -> (f64, usize) {
     let penalty = 0.5 * k * k;
-    let mut cost = 0.0;
-    let mut count = 0;
-    for (r, &want) in rows.iter().zip(expected) {
-        let Some(r) = r else { continue };
-        let mut here = 0;
-        for (row, &u) in r.rows.iter().zip(&r.unknown) {
-            if u == u32::MAX || !a[u as usize].is_finite() {
-                continue;
+    let frames: Vec<(f64, usize)> = rows
+        .par_iter()
+        .zip(expected)
+        .map(|(r, &want)| {
+            let Some(r) = r else { return (0.0, 0) };
+            let (mut cost, mut here) = (0.0, 0);
+            for (row, &u) in r.rows.iter().zip(&r.unknown) {
+                if u == u32::MAX || !a[u as usize].is_finite() {
+                    continue;
+                }
+                cost += huber(row.residual(a[u as usize]), k).0;
+                here += 1;
             }
-            cost += huber(row.residual(a[u as usize]), k).0;
-            here += 1;
-        }
-        cost += want.saturating_sub(here) as f64 * penalty;
-        count += here.max(want);
-    }
-    (cost, count)
+            cost += want.saturating_sub(here) as f64 * penalty;
+            (cost, here.max(want))
+        })
+        .collect();
+    frames
+        .iter()
+        .fold((0.0, 0), |(c, n), &(fc, fn_)| (c + fc, n + fn_))
 }
 
 /// Rows per frame counted by [`total_cost`] (those with an albedo).
@@ -347,8 +445,9 @@ fn reduced_system(
     rows: &[Option<Rows>],
     a: &[f64],
     k: f64,
-    unknowns: usize,
+    seen: &Sightings,
 ) -> (DMatrix<f64>, DVector<f64>) {
+    let unknowns = seen.unknowns();
     let n = rows.len();
     /// One frame's sums over its rows.
     struct FrameSums {
@@ -396,62 +495,29 @@ fn reduced_system(
             Some(s)
         })
         .collect();
-    // Per unknown, its sums over the frames, and the frames that see it (frame and slot, in
-    // frame order) as one list over all unknowns: those of unknown u at seen[start[u]..
-    // start[u + 1]]. `place[f][slot]` is where frame f's slot is in that list.
+    // Per unknown, its sums over the frames that have rows of it.
     let mut haa = vec![0.0; unknowns];
     let mut ga = vec![0.0; unknowns];
-    let mut start = vec![0usize; unknowns + 1];
     for s in sums.iter().flatten() {
         for (&u, &(_, hu, gu)) in s.unknown.iter().zip(&s.coupling) {
             if u != u32::MAX {
                 haa[u as usize] += hu;
                 ga[u as usize] += gu;
-                start[u as usize + 1] += 1;
             }
         }
     }
-    for u in 0..unknowns {
-        start[u + 1] += start[u];
-    }
-    let mut seen = vec![(0u32, 0u32); start[unknowns]];
-    let mut next = start.clone();
-    let place: Vec<Vec<usize>> = sums
-        .iter()
-        .enumerate()
-        .map(|(f, s)| {
-            let Some(s) = s else { return Vec::new() };
-            s.unknown
-                .iter()
-                .enumerate()
-                .map(|(slot, &u)| {
-                    if u == u32::MAX {
-                        return usize::MAX;
-                    }
-                    let at = next[u as usize];
-                    seen[at] = (f as u32, slot as u32);
-                    next[u as usize] += 1;
-                    at
-                })
-                .collect()
-        })
-        .collect();
     // Each cell couples every pair of frames that see it. Frame f's row of blocks, (f, g) for
     // g >= f, and its gradient are summed by one task, over its unknowns in increasing order
     // as a loop over all unknowns would; the lower block triangle is mirrored after.
-    let block_rows: Vec<(Vec<[[f64; P]; P]>, [f64; P])> = sums
+    let block_rows: Vec<(Vec<Block>, [f64; P])> = sums
         .par_iter()
         .enumerate()
         .map(|(f, s)| {
-            let mut blocks = vec![[[0.0; P]; P]; n - f];
+            let mut blocks: Vec<Block> = vec![[[0.0; P]; P]; n - f];
             let Some(s) = s else {
                 return (blocks, [0.0; P]);
             };
-            for i in 0..P {
-                for l in 0..P {
-                    blocks[0][i][l] = s.h[i.min(l)][i.max(l)];
-                }
-            }
+            blocks[0] = std::array::from_fn(|i| std::array::from_fn(|l| s.h[i.min(l)][i.max(l)]));
             let mut grad = s.g;
             for (slot, &u) in s.unknown.iter().enumerate() {
                 let u = u as usize;
@@ -463,10 +529,13 @@ fn reduced_system(
                 for i in 0..P {
                     grad[i] -= cf[i] * ga[u] * inv;
                 }
-                for &(fg, sg) in &seen[place[f][slot]..start[u + 1]] {
+                for &(fg, sg) in seen.from(u, f, slot) {
                     let Some(other) = &sums[fg as usize] else {
                         continue;
                     };
+                    if other.unknown[sg as usize] == u32::MAX {
+                        continue;
+                    }
                     let cg = &other.coupling[sg as usize].0;
                     let block = &mut blocks[fg as usize - f];
                     for i in 0..P {
@@ -573,7 +642,7 @@ pub fn refine_jointly(
             start.clone_from(&poses);
         }
         let cells = number_cells(&snaps, opts);
-        let unknowns = cells.unknowns;
+        let seen = Sightings::new(&cells.slot_unknowns(), cells.unknowns);
         let median_depth: Vec<f64> = snaps
             .iter()
             .map(|s| s.as_ref().map_or(1.0, |s| s.median_depth))
@@ -582,7 +651,7 @@ pub fn refine_jointly(
             .map(|f| roles[f] != JointRole::Refined || snaps[f].is_none())
             .collect();
         let mut rows = rows_at(&snaps, &cells, &poses, &log_k);
-        let mut a = solve_albedo(&rows, unknowns, k, opts.reweightings);
+        let mut a = solve_albedo(&rows, &seen, k, opts.reweightings);
         let expected = counted(&rows, &a);
         let (mut cost, count) = total_cost(&rows, &a, k, &expected);
         let start_cost = cost / count.max(1) as f64;
@@ -595,7 +664,7 @@ pub fn refine_jointly(
         };
         let mut lambda = 1e-4;
         for _ in 0..opts.steps {
-            let (mut h, mut g) = reduced_system(&rows, &a, k, unknowns);
+            let (mut h, mut g) = reduced_system(&rows, &a, k, &seen);
             if opts.hold_mean_view_shift && !free.is_empty() && hold.is_none() {
                 let mut d: Vec<f64> = free.iter().map(|&f| h[(P * f + 2, P * f + 2)]).collect();
                 d.sort_by(f64::total_cmp);
@@ -651,7 +720,7 @@ pub fn refine_jointly(
                     cand_k[f] += s[6] * shrink;
                 }
                 let cand_rows = rows_at(&snaps, &cells, &cand, &cand_k);
-                let cand_a = solve_albedo(&cand_rows, unknowns, k, opts.reweightings);
+                let cand_a = solve_albedo(&cand_rows, &seen, k, opts.reweightings);
                 let (c, _) = total_cost(&cand_rows, &cand_a, k, &expected);
                 let c = c + held(hold, &cand);
                 if c < cost {
@@ -761,6 +830,11 @@ mod tests {
             .collect()
     }
 
+    /// What every frame of [`random_rows`] sees: each unknown in the slot of its number.
+    fn all_seen(frames: usize, unknowns: usize) -> Sightings {
+        Sightings::new(&vec![(0..unknowns as u32).collect(); frames], unknowns)
+    }
+
     /// The reduced system equals the Schur complement of the full normal equations over the
     /// poses, gains and albedo, assembled densely from the same residuals.
     #[test]
@@ -771,7 +845,7 @@ mod tests {
         let a: Vec<f64> = (0..unknowns).map(|_| rng.range(0.8, 1.2)).collect();
         // A Huber threshold that some residuals exceed: their weights are below one.
         let k = 0.3;
-        let (h, g) = reduced_system(&rows, &a, k, unknowns);
+        let (h, g) = reduced_system(&rows, &a, k, &all_seen(frames, unknowns));
 
         let m = P * frames + unknowns;
         let mut full = DMatrix::<f64>::zeros(m, m);
@@ -848,7 +922,7 @@ mod tests {
     fn albedo_is_the_least_squares_value_of_each_cell() {
         let mut rng = Rng::new(3);
         let rows = random_rows(4, 6, &mut rng);
-        let a = solve_albedo(&rows, 6, 1e9, 2);
+        let a = solve_albedo(&rows, &all_seen(4, 6), 1e9, 2);
         let mut sums = [0.0f64; 6];
         for r in rows.iter().flatten() {
             for (row, &u) in r.rows.iter().zip(&r.unknown) {
