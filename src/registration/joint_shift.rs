@@ -224,25 +224,27 @@ impl CellRows {
         opts: &JointOptions,
         k: f64,
     ) -> (f64, usize) {
-        let (mut cost, mut count) = (0.0, 0);
-        let mut list = Vec::new();
-        for key in keys {
-            list.clear();
-            if let Some(rows) = self.by_key.get(key) {
-                list.extend(
-                    rows.iter()
-                        .filter(|(f, _)| !run.contains(&(*f as usize)))
-                        .map(|&(f, i)| self.frame_rows[f as usize][i as usize].1),
-                );
-            }
-            if let Some(rows) = run_rows.get(key) {
-                list.extend_from_slice(rows);
-            }
-            let (c, n) = cell_cost(&list, opts.min_frames, k, opts.reweightings);
-            cost += c;
-            count += n;
-        }
-        (cost, count)
+        // Each cell's cost in parallel, summed in key order: the same sum on every run.
+        let per_cell: Vec<(f64, usize)> = keys
+            .par_iter()
+            .map_init(Vec::new, |list, key| {
+                list.clear();
+                if let Some(rows) = self.by_key.get(key) {
+                    list.extend(
+                        rows.iter()
+                            .filter(|(f, _)| !run.contains(&(*f as usize)))
+                            .map(|&(f, i)| self.frame_rows[f as usize][i as usize].1),
+                    );
+                }
+                if let Some(rows) = run_rows.get(key) {
+                    list.extend_from_slice(rows);
+                }
+                cell_cost(list, opts.min_frames, k, opts.reweightings)
+            })
+            .collect();
+        per_cell
+            .iter()
+            .fold((0.0, 0), |(cost, count), &(c, n)| (cost + c, count + n))
     }
 
     /// Replace the rows of frame `f`.
