@@ -786,12 +786,28 @@ mod tests {
     use super::*;
     use crate::rng::SplitMix64 as Rng;
 
-    /// Random rows of `frames` frames over `unknowns` albedo unknowns, each unknown seen by
-    /// every frame a few times, some rows with no unknown.
-    fn random_rows(frames: usize, unknowns: usize, rng: &mut Rng) -> Vec<Option<Rows>> {
-        (0..frames)
-            .map(|_| {
+    /// Random rows of `frames` (at least three) frames over `unknowns` albedo unknowns, and
+    /// which frames see which. Frame f sees the unknowns u with (u + f) % 4 != 0 (so every
+    /// unknown at least two frames), in slots by rank, each a few times, but frame 0 has no row
+    /// of its last; some rows have no unknown.
+    fn random_rows(
+        frames: usize,
+        unknowns: usize,
+        rng: &mut Rng,
+    ) -> (Vec<Option<Rows>>, Sightings) {
+        let sees: Vec<Vec<u32>> = (0..frames)
+            .map(|f| {
+                (0..unknowns as u32)
+                    .filter(|u| (*u as usize + f) % 4 != 0)
+                    .collect()
+            })
+            .collect();
+        let rows = (0..frames)
+            .map(|f| {
+                let own = &sees[f];
+                let with_rows = own.len() - usize::from(f == 0);
                 let mut rows = Vec::new();
+                let mut slot = Vec::new();
                 let mut unknown = Vec::new();
                 for i in 0..6 * unknowns {
                     let r = || std::array::from_fn(|_| 0.0f32);
@@ -814,25 +830,22 @@ mod tests {
                         row.specular[j] = rng.range_f32(-0.1, 0.1);
                     }
                     rows.push(row);
-                    unknown.push(match i % 7 {
-                        6 => u32::MAX,
-                        _ => (i % unknowns) as u32,
-                    });
+                    let (u, s) = match i % 7 {
+                        6 => (u32::MAX, u32::MAX),
+                        _ => (own[i % with_rows], (i % with_rows) as u32),
+                    };
+                    unknown.push(u);
+                    slot.push(s);
                 }
-                let slot = unknown.clone();
                 Some(Rows {
                     rows,
                     unknown,
                     slot,
-                    slots: unknowns,
+                    slots: own.len(),
                 })
             })
-            .collect()
-    }
-
-    /// What every frame of [`random_rows`] sees: each unknown in the slot of its number.
-    fn all_seen(frames: usize, unknowns: usize) -> Sightings {
-        Sightings::new(&vec![(0..unknowns as u32).collect(); frames], unknowns)
+            .collect();
+        (rows, Sightings::new(&sees, unknowns))
     }
 
     /// The reduced system equals the Schur complement of the full normal equations over the
@@ -841,11 +854,11 @@ mod tests {
     fn reduced_system_is_the_schur_complement_of_the_full_normal_equations() {
         let mut rng = Rng::new(7);
         let (frames, unknowns) = (3, 5);
-        let rows = random_rows(frames, unknowns, &mut rng);
+        let (rows, seen) = random_rows(frames, unknowns, &mut rng);
         let a: Vec<f64> = (0..unknowns).map(|_| rng.range(0.8, 1.2)).collect();
         // A Huber threshold that some residuals exceed: their weights are below one.
         let k = 0.3;
-        let (h, g) = reduced_system(&rows, &a, k, &all_seen(frames, unknowns));
+        let (h, g) = reduced_system(&rows, &a, k, &seen);
 
         let m = P * frames + unknowns;
         let mut full = DMatrix::<f64>::zeros(m, m);
@@ -921,8 +934,8 @@ mod tests {
     #[test]
     fn albedo_is_the_least_squares_value_of_each_cell() {
         let mut rng = Rng::new(3);
-        let rows = random_rows(4, 6, &mut rng);
-        let a = solve_albedo(&rows, &all_seen(4, 6), 1e9, 2);
+        let (rows, seen) = random_rows(4, 6, &mut rng);
+        let a = solve_albedo(&rows, &seen, 1e9, 2);
         let mut sums = [0.0f64; 6];
         for r in rows.iter().flatten() {
             for (row, &u) in r.rows.iter().zip(&r.unknown) {
