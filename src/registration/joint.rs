@@ -77,7 +77,8 @@ impl Default for JointOptions {
 pub struct JointResult {
     /// Every frame's pose.
     pub poses: Vec<Affine>,
-    /// Mean robust cost per residual before and after each render's steps.
+    /// Mean robust cost per residual before and after each render's steps; the renders end
+    /// early after one that took no step (the next would repeat it).
     pub costs: Vec<(f64, f64)>,
     /// The runs [`JointOptions::shift_search`] moved.
     pub shifted: Vec<RunShift>,
@@ -663,6 +664,7 @@ pub fn refine_jointly(
             hold.map_or(0.0, |w| 0.5 * w * view_shift_sum(&start, p, &free).powi(2))
         };
         let mut lambda = 1e-4;
+        let mut stepped = false;
         for _ in 0..opts.steps {
             let (mut h, mut g) = reduced_system(&rows, &a, k, &seen);
             if opts.hold_mean_view_shift && !free.is_empty() && hold.is_none() {
@@ -734,14 +736,25 @@ pub fn refine_jointly(
             if !accepted {
                 break;
             }
+            stepped = true;
         }
-        if render + 1 == opts.renders {
+        // A render that took no step leaves the poses where it found them, and the next render
+        // would repeat it to the bit (the same rays, the same start of the damping): done.
+        let last = render + 1 == opts.renders || !stepped;
+        if last {
             frame_costs = per_frame_costs(&rows, &a, k);
         }
         let end_cost = (cost - held(hold, &poses)) / count.max(1) as f64;
         costs.push((start_cost, end_cost));
         if let Some(p) = &opts.progress {
-            p.inc(1);
+            p.inc(if last {
+                (opts.renders - render) as u64
+            } else {
+                1
+            });
+        }
+        if last {
+            break;
         }
     }
     Ok(JointResult {
