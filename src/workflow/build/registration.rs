@@ -654,13 +654,16 @@ const LATER_TEXTURE_FROM_ROUND: usize = 2;
 /// levels 2, 1, 0 32.74 dB; BENCHMARKS.md, session 38).
 const JOINT_LEVELS: [usize; 2] = [1, 0];
 
-/// Renders per level of the joint stage. Its cost is consistent from one render to the next
-/// once the points are off the pixel centres ([`RegistrationOptions::ray_jitter`]), so a
-/// further render keeps lowering it: demo phantom, 3 mm / 4 deg tracker, new views 31.27 /
-/// 31.56 / 31.64 / 31.70 dB with 3 / 4 / 5 / 6 renders; one more render on each level adds
-/// about 5 s to the demo build, whose registration is near the 60 s issue 16 allows it
-/// (BENCHMARKS.md, session 40).
-const JOINT_RENDERS: usize = 4;
+/// Most renders on each of [`JOINT_LEVELS`] (a level ends early after a render that took no
+/// step). The joint stage's cost is consistent from one render to the next once the points are
+/// off the pixel centres ([`RegistrationOptions::ray_jitter`]), so a further render keeps
+/// lowering it, and renders on level 1, where the move is gathered, do more than on level 0:
+/// demo phantom, 3 mm / 4 deg tracker, new views 31.59 / 31.65 / 31.78 / 31.74 dB with 4 / 5
+/// / 6 / 8 renders on level 1 and 4 on level 0, 31.50 dB with 4 and 7, 31.71 dB with 6 and 6;
+/// from 4, 4 to 6, 4 seed 7 at 3 mm / 4 deg 29.82 -> 29.98 dB, 1.5 mm / 2 deg 32.68 -> 32.66
+/// dB, and ATM_384 and `--poses first` the same to the bit (their fifth render took no step).
+/// A render on level 1 costs about 1.8 s of the demo build (BENCHMARKS.md, session 41).
+const JOINT_RENDERS: [usize; 2] = [6, 4];
 
 /// Most frames the joint stage refines in one solve. Its normal equations are dense, seven
 /// unknowns a frame (200 frames: 1400 x 1400, 16 MB, and a cell seen by k frames adds k^2
@@ -701,15 +704,20 @@ fn joint_stage(
         return Ok(None);
     }
     let below = levels_below_reference(&view.camera);
-    let mut levels: Vec<usize> = JOINT_LEVELS
+    // Frames smaller than the reference have fewer levels: passes that fall on the same level
+    // are one, the finest's.
+    let mut passes: Vec<(usize, usize)> = JOINT_LEVELS
         .iter()
-        .map(|l| l.saturating_sub(below))
+        .zip(JOINT_RENDERS)
+        .map(|(l, renders)| (l.saturating_sub(below), renders))
         .collect();
-    levels.dedup();
+    passes.reverse();
+    passes.dedup_by_key(|p| p.0);
+    passes.reverse();
     let reg = FrameRegistrar::new(
         view.model_parts(scene, light, None),
         RegistrationOptions {
-            coarsest_level: levels[0],
+            coarsest_level: passes[0].0,
             finest_level: 0,
             // Points off the pixel centres: the cost the solve lowers on the points held
             // between renders is then the cost the next render finds (see `ray_jitter`).
@@ -718,20 +726,16 @@ fn joint_stage(
         },
     )?;
     let windows = joint_windows(&roles, JOINT_WINDOW, JOINT_WINDOW_ANCHORS);
-    let joint = JointOptions {
-        renders: JOINT_RENDERS,
-        ..JointOptions::default()
-    };
     let progress = Progress::new(
         "register (all frames at once)",
-        (windows.len() * levels.len() * joint.renders) as u64,
+        (windows.len() * passes.iter().map(|p| p.1).sum::<usize>()) as u64,
         opts.quiet,
     );
     let mut poses = scene.poses.clone();
     let mut costs: Vec<Option<f64>> = vec![None; n];
     let mut moved = std::collections::BTreeSet::new();
     for window_roles in &windows {
-        for (l, &level) in levels.iter().enumerate() {
+        for (l, &(level, renders)) in passes.iter().enumerate() {
             let result = refine_jointly(
                 &reg,
                 &view.frames,
@@ -741,9 +745,10 @@ fn joint_stage(
                 window_roles,
                 &JointOptions {
                     level,
+                    renders,
                     shift_search: (l == 0).then(ShiftSearch::default),
                     progress: progress.bar(),
-                    ..joint.clone()
+                    ..JointOptions::default()
                 },
             )?;
             moved.extend(result.shifted.iter().flat_map(|s| s.frames.iter().copied()));
