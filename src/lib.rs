@@ -4,6 +4,7 @@
 //! Specific Bronchoscopy Simulation" (MICCAI 2004). Stages meet at plain data types:
 //! [`volume::Volume`], [`camera::Camera`], [`camera::Pose`], [`image::Frame`].
 
+pub mod allocator;
 pub mod camera;
 pub mod error;
 pub mod image;

@@ -343,6 +343,7 @@ fn one_line(e: &anyhow::Error) -> String {
 }
 
 fn main() -> ExitCode {
+    bronchosim::allocator::keep_freed_memory();
     let cli = Cli::parse();
     match run(cli.command, cli.quiet) {
         Ok(summary) => {
