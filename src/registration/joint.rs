@@ -392,16 +392,11 @@ fn total_cost(rows: &[Option<Rows>], a: &[f64], k: f64, expected: &[usize]) -> (
         .zip(expected)
         .map(|(r, &want)| {
             let Some(r) = r else { return (0.0, 0) };
-            let (mut cost, mut here) = (0.0, 0);
-            for (row, &u) in r.rows.iter().zip(&r.unknown) {
-                if u == u32::MAX || !a[u as usize].is_finite() {
-                    continue;
-                }
-                cost += huber(row.residual(a[u as usize]), k).0;
-                here += 1;
-            }
-            cost += want.saturating_sub(here) as f64 * penalty;
-            (cost, here.max(want))
+            let (cost, here) = frame_cost(r, a, k);
+            (
+                cost + want.saturating_sub(here) as f64 * penalty,
+                here.max(want),
+            )
         })
         .collect();
     frames
@@ -427,17 +422,22 @@ fn counted(rows: &[Option<Rows>], a: &[f64]) -> Vec<usize> {
 fn per_frame_costs(rows: &[Option<Rows>], a: &[f64], k: f64) -> Vec<Option<f64>> {
     rows.iter()
         .map(|r| {
-            let r = r.as_ref()?;
-            let (mut cost, mut count) = (0.0, 0usize);
-            for (row, &u) in r.rows.iter().zip(&r.unknown) {
-                if u != u32::MAX && a[u as usize].is_finite() {
-                    cost += huber(row.residual(a[u as usize]), k).0;
-                    count += 1;
-                }
-            }
+            let (cost, count) = frame_cost(r.as_ref()?, a, k);
             (count > 0).then(|| cost / count as f64)
         })
         .collect()
+}
+
+/// One frame's robust cost over its rows with an albedo, and their number.
+fn frame_cost(r: &Rows, a: &[f64], k: f64) -> (f64, usize) {
+    let (mut cost, mut count) = (0.0, 0);
+    for (row, &u) in r.rows.iter().zip(&r.unknown) {
+        if u != u32::MAX && a[u as usize].is_finite() {
+            cost += huber(row.residual(a[u as usize]), k).0;
+            count += 1;
+        }
+    }
+    (cost, count)
 }
 
 /// The normal equations of all frames' parameters with the albedo eliminated (Schur
