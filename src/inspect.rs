@@ -6,7 +6,7 @@ pub mod ct;
 pub use ct::{summarize_ct, CtSummary, NonFiniteVoxels};
 
 use crate::io::case::Case;
-use crate::io::ct::{read_ct, CtSource};
+use crate::io::ct::{ct_folder_source, read_ct, CtSource};
 use crate::io::image_mask::{detect_black_border, BlackBorder};
 use crate::math::Point3;
 use crate::{Error, Result};
@@ -114,15 +114,17 @@ const CASE_ENTRIES: &[&str] = &[
     "video.mp4",
 ];
 
-/// Inspect `path`: a case folder, a NIfTI file or a DICOM series folder. A folder holding any
+/// Inspect `path`: a case folder, a NIfTI file or a CT folder. A folder holding any
 /// case-format entry (ct.nii.gz, camera.json, poses.json, frames/, ...) is a case, so that a
-/// case missing its CT is reported as such; any other folder is a DICOM series.
+/// case missing its CT is reported as such; any other folder is a CT: the one NIfTI file it
+/// holds besides documents (a downloaded scan with its licence and read-me), or else a DICOM
+/// series.
 pub fn inspect(path: &Path, opts: &InspectOptions) -> Result<InspectReport> {
     if path.is_file() {
         return inspect_ct(&CtSource::Nifti(path.to_path_buf()));
     }
     if path.is_dir() && !CASE_ENTRIES.iter().any(|e| path.join(e).exists()) {
-        return inspect_ct(&CtSource::Dicom(path.to_path_buf()));
+        return inspect_ct(&ct_folder_source(path)?);
     }
     if !path.exists() {
         return Err(Error::missing(

@@ -102,6 +102,38 @@ fn finite_ct_reports_none() {
     assert!(text.trim_end().ends_with("OK"), "{text}");
 }
 
+/// A scan as downloaded: a folder holding one NIfTI file with its licence and read-me is that
+/// CT (it was read as a DICOM series and refused); several NIfTI files are named as the problem.
+#[test]
+fn folder_with_one_nifti_is_inspected_as_that_ct() {
+    let file = data("nifti/int16_flipped_sform.nii.gz");
+    let (ok, out, err, _) = inspect(&file, &["--json"]);
+    assert!(ok, "{err}");
+    let direct: Value = serde_json::from_str(&out).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::copy(&file, tmp.path().join("scan.nii.gz")).unwrap();
+    std::fs::write(tmp.path().join("README.md"), "# a chest CT").unwrap();
+    std::fs::write(tmp.path().join("LICENSE"), "CC BY 4.0").unwrap();
+    let (ok, out, err, _) = inspect(tmp.path(), &["--json"]);
+    assert!(ok, "{err}");
+    let r: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(r["kind"], "ct");
+    assert_eq!(r["ct"]["format"], "nifti");
+    assert!(
+        r["case"].as_str().unwrap().ends_with("scan.nii.gz"),
+        "{}",
+        r["case"]
+    );
+    for key in ["dims", "spacing_mm", "hu_range"] {
+        assert_eq!(r["ct"][key], direct["ct"][key], "{key}");
+    }
+    std::fs::copy(&file, tmp.path().join("other.nii")).unwrap();
+    let (ok, _, err, _) = inspect(tmp.path(), &[]);
+    assert!(!ok);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("holds 2 NIfTI files"), "{err}");
+}
+
 #[test]
 fn dicom_folder_is_inspected_as_a_ct() {
     let (ok, out, err, _) = inspect(&data("dicom_real/j2k_lossless"), &["--json"]);

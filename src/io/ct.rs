@@ -69,6 +69,27 @@ fn skipped_warning(dir: &Path, skipped: &[std::path::PathBuf]) -> Option<String>
     ))
 }
 
+/// The CT in a folder that is not a case: its one NIfTI file when that is all it holds besides
+/// the documents a series may travel with ([`dicom::list_series_files`]), else the DICOM series.
+pub fn ct_folder_source(dir: &Path) -> Result<CtSource> {
+    let files = dicom::list_series_files(dir)?;
+    let is_nifti = |p: &PathBuf| {
+        let name = p
+            .file_name()
+            .map_or(String::new(), |n| n.to_string_lossy().to_ascii_lowercase());
+        name.ends_with(".nii") || name.ends_with(".nii.gz")
+    };
+    let nifti: Vec<&PathBuf> = files.iter().filter(|p| is_nifti(p)).collect();
+    match (nifti.len(), files.len()) {
+        (1, 1) => Ok(CtSource::Nifti(files[0].clone())),
+        (n, m) if n > 1 && n == m => Err(Error::invalid(
+            dir,
+            format!("holds {n} NIfTI files and no DICOM series; give the one to read"),
+        )),
+        _ => Ok(CtSource::Dicom(dir.to_path_buf())),
+    }
+}
+
 /// Find the CT of the case in `case_dir`: exactly one of ct.nii.gz, ct.nii or ct/.
 pub fn find_ct(case_dir: &Path) -> Result<CtSource> {
     let candidates = [("ct.nii.gz", false), ("ct.nii", false), ("ct", true)];

@@ -1,7 +1,7 @@
 //! `bronchosim segment`: CT → airway mask → lumen mesh, written as a folder a person (and
 //! 3D Slicer) can open: segmentation.nii.gz, lumen.ply / .obj / .glb, summary.json.
 
-use crate::io::ct::{find_ct, read_ct, CtSource};
+use crate::io::ct::{ct_folder_source, find_ct, read_ct, CtSource};
 use crate::io::mesh_export::{write_glb, write_obj, write_ply};
 use crate::io::nifti::write_nifti;
 use crate::io::output_dir::OutputDir;
@@ -82,7 +82,7 @@ pub struct StageSeconds {
 }
 
 /// The CT named by `input`: a case folder (ct.nii.gz / ct.nii / ct/), a NIfTI file, or a
-/// DICOM folder.
+/// folder holding one NIfTI file or a DICOM series ([`ct_folder_source`]).
 pub fn resolve_ct_input(input: &Path) -> Result<CtSource> {
     if input.is_file() {
         return Ok(CtSource::Nifti(input.to_path_buf()));
@@ -95,8 +95,8 @@ pub fn resolve_ct_input(input: &Path) -> Result<CtSource> {
     }
     match find_ct(input) {
         Ok(src) => Ok(src),
-        // A folder without ct.* is taken as the DICOM series itself.
-        Err(Error::Missing { .. }) => Ok(CtSource::Dicom(input.to_path_buf())),
+        // A folder without ct.* is the CT itself: its one NIfTI file or its DICOM series.
+        Err(Error::Missing { .. }) => ct_folder_source(input),
         Err(e) => Err(e),
     }
 }
