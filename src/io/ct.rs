@@ -79,8 +79,8 @@ pub fn ct_folder_source(dir: &Path) -> Result<CtSource> {
             .map_or(String::new(), |n| n.to_string_lossy().to_ascii_lowercase());
         name.ends_with(".nii") || name.ends_with(".nii.gz")
     };
-    let nifti: Vec<&PathBuf> = files.iter().filter(|p| is_nifti(p)).collect();
-    match (nifti.len(), files.len()) {
+    let nifti = files.iter().filter(|p| is_nifti(p)).count();
+    match (nifti, files.len()) {
         (1, 1) => Ok(CtSource::Nifti(files[0].clone())),
         (n, m) if n > 1 && n == m => Err(Error::invalid(
             dir,
