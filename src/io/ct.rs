@@ -73,13 +73,7 @@ fn skipped_warning(dir: &Path, skipped: &[std::path::PathBuf]) -> Option<String>
 /// the documents a series may travel with ([`dicom::list_series_files`]), else the DICOM series.
 pub fn ct_folder_source(dir: &Path) -> Result<CtSource> {
     let files = dicom::list_series_files(dir)?;
-    let is_nifti = |p: &PathBuf| {
-        let name = p
-            .file_name()
-            .map_or(String::new(), |n| n.to_string_lossy().to_ascii_lowercase());
-        name.ends_with(".nii") || name.ends_with(".nii.gz")
-    };
-    let nifti = files.iter().filter(|p| is_nifti(p)).count();
+    let nifti = files.iter().filter(|p| nifti::is_nifti_name(p)).count();
     match (nifti, files.len()) {
         (1, 1) => Ok(CtSource::Nifti(files[0].clone())),
         (n, m) if n > 1 && n == m => Err(Error::invalid(

@@ -11,7 +11,7 @@
 
 use crate::inspect::{summarize_ct, CtSummary};
 use crate::io::ct::read_ct;
-use crate::io::nifti::write_nifti;
+use crate::io::nifti::{is_nifti_name, write_nifti};
 use crate::workflow::segment::resolve_ct_input;
 use crate::{Error, Result};
 use serde::Serialize;
@@ -45,11 +45,7 @@ pub struct ConvertSummary {
 /// Convert the CT named by `input` (a DICOM folder, a NIfTI file or a case folder) into the
 /// NIfTI file `out`. See the module documentation for the steps.
 pub fn convert_ct(input: &Path, out: &Path, opts: &ConvertOptions) -> Result<ConvertSummary> {
-    let name = out
-        .file_name()
-        .map(|n| n.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    if !(name.ends_with(".nii") || name.ends_with(".nii.gz")) {
+    if !is_nifti_name(out) {
         return Err(Error::invalid(
             out,
             "output must be a NIfTI file ending in .nii or .nii.gz",

@@ -127,6 +127,15 @@ pub(super) fn is_gz(path: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("gz"))
 }
 
+/// The file name is a single-file NIfTI's: it ends in `.nii` or `.nii.gz` (any case).
+pub fn is_nifti_name(path: &Path) -> bool {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    name.ends_with(".nii") || name.ends_with(".nii.gz")
+}
+
 /// Read a NIfTI-1 volume as `f32` (scl_slope/scl_inter applied), with its affine.
 pub fn read_nifti(path: &Path) -> Result<Volume<f32>> {
     read_nifti_with_info(path).map(|(v, _)| v)
