@@ -6,10 +6,15 @@
 //! cargo run --release --example joint_refine -- CASE WORK start=DIR [levels=1,0] [renders=3]
 //!     [steps=4] [cell=0.25] [trust=1] [minframes=2] [gain=yes|no] [hold=yes|no]
 //!     [final=yes|no] [search=yes|no] [run=6] [gainmin=0.005] [jitter=yes|no]
+//!     [light=MODEL] [costs=yes|no]
 //! ```
 //! `start=DIR` reads `DIR/poses.json` (e.g. a model built with registration). WORK receives
 //! `start/case` and `start/model` (built with those poses, every frame, no hold-out), and
 //! `final/case` and `final/model` (built with the refined poses and scored on the truth views).
+//! `light=MODEL` takes the light and gains of a model built before (every frame kept) instead
+//! of building `start/model`, so that several pose sets are compared under one light;
+//! `steps=0 renders=1 final=no` then prints the reduced cost at the start poses alone, and
+//! `costs=yes` each frame's.
 
 #[path = "common/phantom_run.rs"]
 mod phantom_run;
@@ -31,6 +36,8 @@ fn main() -> anyhow::Result<()> {
     let case_dir = PathBuf::from(&args[0]);
     let work = PathBuf::from(&args[1]);
     let mut start: Option<PathBuf> = None;
+    let mut light_from: Option<PathBuf> = None;
+    let mut frame_costs = false;
     let mut levels = vec![1usize, 0];
     let mut opts = JointOptions::default();
     let mut final_model = true;
@@ -39,6 +46,8 @@ fn main() -> anyhow::Result<()> {
     for kv in &args[2..] {
         match kv.split_once('=') {
             Some(("start", v)) => start = Some(PathBuf::from(v)),
+            Some(("light", v)) => light_from = Some(PathBuf::from(v)),
+            Some(("costs", v)) => frame_costs = v == "yes",
             Some(("levels", v)) => {
                 levels = v.split(',').map(|x| x.parse()).collect::<Result<_, _>>()?
             }
@@ -77,13 +86,18 @@ fn main() -> anyhow::Result<()> {
     if work.join("start/case").exists() {
         std::fs::remove_dir_all(work.join("start/case"))?;
     }
-    case_copy(&case_dir, &work.join("start/case"), &entries)?;
-    build_model(
-        &work.join("start/case"),
-        &work.join("start/model"),
-        &build_opts,
-    )?;
-    let model = Model::load(&work.join("start/model"))?;
+    let model = match &light_from {
+        Some(dir) => Model::load(dir)?,
+        None => {
+            case_copy(&case_dir, &work.join("start/case"), &entries)?;
+            build_model(
+                &work.join("start/case"),
+                &work.join("start/model"),
+                &build_opts,
+            )?;
+            Model::load(&work.join("start/model"))?
+        }
+    };
     let light = model.calibrated().expect("calibrated light");
     let reg = FrameRegistrar::new(
         model.registration_parts().expect("calibrated light"),
@@ -113,6 +127,11 @@ fn main() -> anyhow::Result<()> {
         }
         for (render, (before, after)) in r.costs.iter().enumerate() {
             println!("level {level} render {render}: mean cost {before:.4} -> {after:.4}");
+        }
+        if frame_costs {
+            for (i, c) in r.frame_costs.iter().enumerate() {
+                println!("frame_cost {i} {:.5}", c.unwrap_or(f64::NAN));
+            }
         }
         current = r.poses;
         println!(
