@@ -333,6 +333,28 @@ fn build_keeps_exact_poses_when_refining_does_not_predict_held_out_frames_better
         moved += usize::from(r.pose.camera_to_world != g.pose.camera_to_world);
     }
     assert!(moved > 12, "the rounds moved {moved} of 24 poses");
+    // Both reports say the corrections are zero because the given poses were kept, with the
+    // two held-out scores, and the register report where the refined poses are.
+    for (report, reg) in [
+        (out.join("report.html"), reg),
+        (reg_dir.join("report.html"), &r.registration),
+    ] {
+        let scores = format!(
+            "{:.2} dB, with the given ones at {:.2} dB",
+            reg.held_out_psnr_refined_db.unwrap(),
+            reg.held_out_psnr_given_db.unwrap()
+        );
+        let html = std::fs::read_to_string(&report).unwrap();
+        assert!(
+            html.contains("The given poses were kept") && html.contains(&scores),
+            "{}: {scores}",
+            report.display()
+        );
+    }
+    let html = std::fs::read_to_string(reg_dir.join("report.html")).unwrap();
+    assert!(html.contains("refined_poses.json"));
+    let text = bronchosim::workflow::summary::register_text(&reg_dir, &r);
+    assert!(text.contains("the given poses were kept"), "{text}");
 }
 
 /// A 12-frame 128x128 phantom in `case_dir` whose poses carry 1 mm / 1 degree of error.

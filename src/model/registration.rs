@@ -122,6 +122,29 @@ impl PoseRegistration {
         }
     }
 
+    /// Which poses the model is built with and why, as a sentence: the refined ones, or the
+    /// given ones when the refined ones do not predict held-out frames enough better (every
+    /// frame's correction is then zero). Empty without a held-out score of both.
+    pub fn kept_text(&self) -> String {
+        let (Some(given), Some(refined)) =
+            (self.held_out_psnr_given_db, self.held_out_psnr_refined_db)
+        else {
+            return String::new();
+        };
+        match self.kept.as_str() {
+            "given" => format!(
+                "The given poses were kept, so every correction is zero: with the refined \
+                 poses held-out frames are predicted at {refined:.2} dB, with the given ones at \
+                 {given:.2} dB, and the refined poses replace them only when they predict \
+                 held-out frames better by a margin (1 dB unless the build is told otherwise)."
+            ),
+            _ => format!(
+                "The refined poses are used: with them held-out frames are predicted at \
+                 {refined:.2} dB, with the given ones at {given:.2} dB."
+            ),
+        }
+    }
+
     /// What the first round (and the tracking) registered against, as a sentence.
     pub fn first_light_text(&self) -> String {
         let what = match (self.tracking.is_some(), self.rounds.is_empty()) {

@@ -102,12 +102,16 @@ pub fn registration_report(
     let mut html = format!(
         "<!doctype html><meta charset=utf-8><title>bronchosim registration</title>\
          <style>body{{font-family:sans-serif;max-width:60em;margin:2em auto}}td,th{{padding:0 .6em}}</style>\
-         <h1>Registration of {}</h1><p>{} frames, {} left out of the model. {}</p>",
+         <h1>Registration of {}</h1><p>{} frames, {} left out of the model. {} {}</p>",
         html_escape(&case_dir.display().to_string()),
         reg.frames.len(),
         reg.left_out,
-        html_escape(&reg.first_light_text())
+        html_escape(&reg.first_light_text()),
+        html_escape(&reg.kept_text())
     );
+    if reg.kept == "given" {
+        html.push_str("<p>What the rounds refined the poses to is in refined_poses.json.</p>");
+    }
     if let Some(t) = &reg.tracking {
         html.push_str(&tracking_html(t));
     }

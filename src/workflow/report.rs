@@ -385,11 +385,12 @@ fn blur_check_section(html: &mut String, check: &BlurCheck, at_given_poses: bool
 fn registration_section(html: &mut String, reg: &PoseRegistration) {
     html.push_str(&format!(
         "<h2>Registration of the poses to the CT</h2><p>{}; {} of {} frames left out \
-         (their pose could not be trusted). {} Each frame's correction of its given pose:</p>",
+         (their pose could not be trusted). {} {} Each frame's correction of its given pose:</p>",
         reg.rounds_text(),
         reg.left_out,
         reg.frames.len(),
-        html_escape(&reg.first_light_text())
+        html_escape(&reg.first_light_text()),
+        html_escape(&reg.kept_text())
     ));
     if let Some(t) = &reg.tracking {
         html.push_str(&tracking_html(t));

@@ -133,8 +133,19 @@ fn registration_line(reg: &PoseRegistration) -> String {
     if reg.consensus_start {
         first_light += "  first round run again from the given poses corrected as each frame's neighbours agreed (from the given poses it converged on too few frames)\n";
     }
+    let kept = match (
+        reg.kept.as_str(),
+        reg.held_out_psnr_refined_db,
+        reg.held_out_psnr_given_db,
+    ) {
+        ("given", Some(r), Some(g)) => format!(
+            "  the given poses were kept: held-out frames {r:.2} dB with the refined poses, {g:.2} dB with the given ones\n"
+        ),
+        _ => String::new(),
+    };
     tracked
         + &first_light
+        + &kept
         + &format!(
         "  poses registered in {}: median correction {:.2} mm / {:.2} deg (largest {:.2} mm / {:.2} deg), {} of {} frames left out\n",
         reg.rounds_text(),
