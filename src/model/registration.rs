@@ -131,17 +131,27 @@ impl PoseRegistration {
         else {
             return String::new();
         };
+        let start = self.started_from();
         match self.kept.as_str() {
             "given" => format!(
-                "The given poses were kept, so every correction is zero: with the refined \
-                 poses held-out frames are predicted at {refined:.2} dB, with the given ones at \
-                 {given:.2} dB, and the refined poses replace them only when they predict \
+                "The {start} poses were kept, so every correction is zero: with the refined \
+                 poses held-out frames are predicted at {refined:.2} dB, with the {start} ones \
+                 at {given:.2} dB, and the refined poses replace them only when they predict \
                  held-out frames better by a margin (1 dB unless the build is told otherwise)."
             ),
             _ => format!(
                 "The refined poses are used: with them held-out frames are predicted at \
-                 {refined:.2} dB, with the given ones at {given:.2} dB."
+                 {refined:.2} dB, with the {start} ones at {given:.2} dB."
             ),
+        }
+    }
+
+    /// What the rounds started from, in words: the "given" poses of the record are the
+    /// tracked ones when the video was tracked from its first pose.
+    pub fn started_from(&self) -> &'static str {
+        match self.tracking {
+            Some(_) => "tracked",
+            None => "given",
         }
     }
 
@@ -295,4 +305,52 @@ pub struct PoseTruth {
     pub refined: Option<PoseAccuracy>,
     /// The poses the model was built with.
     pub used: PoseAccuracy,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A registration record with held-out scores, as model.json holds it.
+    fn record(kept: &str, tracking: bool) -> PoseRegistration {
+        let mut v = serde_json::json!({
+            "frames": [], "rounds": [], "left_out": 0, "kept": kept,
+            "held_out_psnr_given_db": 30.004, "held_out_psnr_refined_db": 30.456,
+        });
+        if tracking {
+            v["tracking"] = serde_json::json!({
+                "frames_tracked": 10, "frames": 10, "first_lost": null, "light_fits": 2,
+                "seconds": 1.0, "seconds_per_frame": 0.1,
+            });
+        }
+        serde_json::from_value(v).unwrap()
+    }
+
+    #[test]
+    fn kept_text_names_the_poses_used_and_both_scores() {
+        let given = record("given", false).kept_text();
+        assert!(given.starts_with("The given poses were kept"), "{given}");
+        assert!(
+            given.contains("30.46 dB, with the given ones at 30.00 dB"),
+            "{given}"
+        );
+        let tracked = record("given", true).kept_text();
+        assert!(
+            tracked.starts_with("The tracked poses were kept"),
+            "{tracked}"
+        );
+        assert!(
+            tracked.contains("with the tracked ones at 30.00 dB"),
+            "{tracked}"
+        );
+        let refined = record("refined", false).kept_text();
+        assert!(
+            refined.starts_with("The refined poses are used"),
+            "{refined}"
+        );
+        // Without a held-out score of both there is nothing to say.
+        let mut none = record("refined", false);
+        none.held_out_psnr_given_db = None;
+        assert_eq!(none.kept_text(), "");
+    }
 }

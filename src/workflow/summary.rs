@@ -139,7 +139,8 @@ fn registration_line(reg: &PoseRegistration) -> String {
         reg.held_out_psnr_given_db,
     ) {
         ("given", Some(r), Some(g)) => format!(
-            "  the given poses were kept: held-out frames {r:.2} dB with the refined poses, {g:.2} dB with the given ones\n"
+            "  the {start} poses were kept: held-out frames {r:.2} dB with the refined poses, {g:.2} dB with the {start} ones\n",
+            start = reg.started_from()
         ),
         _ => String::new(),
     };
