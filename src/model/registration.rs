@@ -132,18 +132,23 @@ impl PoseRegistration {
             return String::new();
         };
         let start = self.started_from();
-        match self.kept.as_str() {
-            "given" => format!(
+        match self.kept_given() {
+            true => format!(
                 "The {start} poses were kept, so every correction is zero: with the refined \
                  poses held-out frames are predicted at {refined:.2} dB, with the {start} ones \
                  at {given:.2} dB, and the refined poses replace them only when they predict \
                  held-out frames better by a margin (1 dB unless the build is told otherwise)."
             ),
-            _ => format!(
+            false => format!(
                 "The refined poses are used: with them held-out frames are predicted at \
                  {refined:.2} dB, with the {start} ones at {given:.2} dB."
             ),
         }
+    }
+
+    /// The model is built with the poses the rounds started from, not the refined ones.
+    pub fn kept_given(&self) -> bool {
+        self.kept == "given"
     }
 
     /// What the rounds started from, in words: the "given" poses of the record are the

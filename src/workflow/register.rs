@@ -109,7 +109,7 @@ pub fn registration_report(
         html_escape(&reg.first_light_text()),
         html_escape(&reg.kept_text())
     );
-    if reg.kept == "given" {
+    if reg.kept_given() {
         html.push_str("<p>What the rounds refined the poses to is in refined_poses.json.</p>");
     }
     if let Some(t) = &reg.tracking {

@@ -134,11 +134,11 @@ fn registration_line(reg: &PoseRegistration) -> String {
         first_light += "  first round run again from the given poses corrected as each frame's neighbours agreed (from the given poses it converged on too few frames)\n";
     }
     let kept = match (
-        reg.kept.as_str(),
+        reg.kept_given(),
         reg.held_out_psnr_refined_db,
         reg.held_out_psnr_given_db,
     ) {
-        ("given", Some(r), Some(g)) => format!(
+        (true, Some(r), Some(g)) => format!(
             "  the {start} poses were kept: held-out frames {r:.2} dB with the refined poses, {g:.2} dB with the {start} ones\n",
             start = reg.started_from()
         ),
