@@ -6,7 +6,7 @@
 //! cargo run --release --example joint_refine -- CASE WORK start=DIR [levels=1,0] [renders=3]
 //!     [steps=4] [cell=0.25] [trust=1] [minframes=2] [gain=yes|no] [hold=yes|no]
 //!     [final=yes|no] [search=yes|no] [run=6] [gainmin=0.005] [jitter=yes|no]
-//!     [light=MODEL] [costs=yes|no]
+//!     [light=MODEL] [costs=yes|no] [mesh=truth|ctn|offset:D]
 //! ```
 //! `start=DIR` reads `DIR/poses.json` (e.g. a model built with registration). WORK receives
 //! `start/case` and `start/model` (built with those poses, every frame, no hold-out), and
@@ -15,12 +15,19 @@
 //! of building `start/model`, so that several pose sets are compared under one light;
 //! `steps=0 renders=1 final=no` then prints the reduced cost at the start poses alone, and
 //! `costs=yes` each frame's.
+//! `mesh=truth` registers against the phantom's true surface (truth/lumen.ply) instead of the
+//! model's mesh, `mesh=ctn` against the model's mesh with the true surface's normals (each
+//! vertex takes its nearest true vertex's), `mesh=offset:D` against the model's mesh moved D mm
+//! along its normals: how much of where the stage ends is the mesh's. The final model is built
+//! with the CT's mesh either way.
 
 #[path = "common/phantom_run.rs"]
 mod phantom_run;
 
+use bronchosim::io::mesh_export::read_ply;
 use bronchosim::math::Affine;
 use bronchosim::model::Model;
+use bronchosim::raycast::Scene;
 use bronchosim::registration::joint::{refine_jointly, JointOptions, JointRole};
 use bronchosim::registration::joint_shift::ShiftSearch;
 use bronchosim::registration::{FrameRegistrar, RegistrationOptions};
@@ -31,6 +38,18 @@ use phantom_run::{
 use std::path::PathBuf;
 use std::time::Instant;
 
+/// The surface the frames are registered against (`mesh=`).
+enum MeshChoice {
+    /// The model's (the CT's) mesh.
+    Model,
+    /// The phantom's true surface.
+    Truth,
+    /// The model's mesh with the true surface's normals.
+    TrueNormals,
+    /// The model's mesh moved this far (mm) along its normals.
+    Offset(f32),
+}
+
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let case_dir = PathBuf::from(&args[0]);
@@ -38,6 +57,7 @@ fn main() -> anyhow::Result<()> {
     let mut start: Option<PathBuf> = None;
     let mut light_from: Option<PathBuf> = None;
     let mut frame_costs = false;
+    let mut mesh = MeshChoice::Model;
     let mut levels = vec![1usize, 0];
     let mut opts = JointOptions::default();
     let mut final_model = true;
@@ -48,6 +68,17 @@ fn main() -> anyhow::Result<()> {
             Some(("start", v)) => start = Some(PathBuf::from(v)),
             Some(("light", v)) => light_from = Some(PathBuf::from(v)),
             Some(("costs", v)) => frame_costs = v == "yes",
+            Some(("mesh", v)) => {
+                mesh = match v {
+                    "model" => MeshChoice::Model,
+                    "truth" => MeshChoice::Truth,
+                    "ctn" => MeshChoice::TrueNormals,
+                    _ => match v.strip_prefix("offset:") {
+                        Some(d) => MeshChoice::Offset(d.parse()?),
+                        None => anyhow::bail!("mesh={v}: model, truth, ctn or offset:D"),
+                    },
+                }
+            }
             Some(("levels", v)) => {
                 levels = v.split(',').map(|x| x.parse()).collect::<Result<_, _>>()?
             }
@@ -99,10 +130,40 @@ fn main() -> anyhow::Result<()> {
         }
     };
     let light = model.calibrated().expect("calibrated light");
-    let reg = FrameRegistrar::new(
-        model.registration_parts().expect("calibrated light"),
-        reg_opts,
-    )?;
+    let (scene, tri_uv) = match mesh {
+        MeshChoice::Model => (None, None),
+        MeshChoice::Truth => {
+            let s = Scene::new(&read_ply(&case_dir.join("truth/lumen.ply"))?)?;
+            let uv = vec![[[0.0f32; 2]; 3]; s.triangle_count()];
+            (Some(s), Some(uv))
+        }
+        MeshChoice::TrueNormals => (
+            Some(normals_from_truth(
+                &model,
+                &case_dir.join("truth/lumen.ply"),
+            )?),
+            None,
+        ),
+        MeshChoice::Offset(d) => {
+            let mut moved = model.mesh.clone();
+            let normals = moved.vertex_normals();
+            for (p, n) in moved.positions.iter_mut().zip(&normals) {
+                *p += n * d;
+            }
+            (Some(Scene::new(&moved)?), None)
+        }
+    };
+    let mut parts = model.registration_parts().expect("calibrated light");
+    if let Some(s) = &scene {
+        parts.scene = s;
+    }
+    if let Some(uv) = &tri_uv {
+        // The true surface has no atlas: registered against its shading, the albedo
+        // eliminated as always in this stage.
+        parts.tri_uv = uv;
+        parts.texture = None;
+    }
+    let reg = FrameRegistrar::new(parts, reg_opts)?;
     let mut current = poses;
     for &level in &levels {
         let t = Instant::now();
@@ -151,4 +212,63 @@ fn main() -> anyhow::Result<()> {
         scored_model(&case_dir, &work.join("final"), &entries)?
     );
     Ok(())
+}
+
+/// The model's mesh with each vertex normal replaced by the normal of the nearest vertex of
+/// the true surface: the CT mesh's positions, the truth's normals.
+fn normals_from_truth(model: &Model, true_ply: &std::path::Path) -> anyhow::Result<Scene> {
+    let truth = Scene::new(&read_ply(true_ply)?)?;
+    let mut scene = Scene::new(&model.mesh)?;
+    let cell = 0.3f32;
+    let key = |p: &[f32; 3]| {
+        (
+            (p[0] / cell).floor() as i32,
+            (p[1] / cell).floor() as i32,
+            (p[2] / cell).floor() as i32,
+        )
+    };
+    let mut grid: std::collections::HashMap<(i32, i32, i32), Vec<u32>> = Default::default();
+    for (i, p) in truth.positions.iter().enumerate() {
+        grid.entry(key(p)).or_default().push(i as u32);
+    }
+    let mut far = 0;
+    for (v, p) in scene.positions.iter().enumerate() {
+        let (kx, ky, kz) = key(p);
+        let mut best = (f32::MAX, u32::MAX);
+        for r in [1, 3] {
+            for dx in -r..=r {
+                for dy in -r..=r {
+                    for dz in -r..=r {
+                        if let Some(list) = grid.get(&(kx + dx, ky + dy, kz + dz)) {
+                            for &i in list {
+                                let q = truth.positions[i as usize];
+                                let d = (0..3).map(|a| (q[a] - p[a]).powi(2)).sum::<f32>();
+                                if d < best.0 {
+                                    best = (d, i);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            if best.1 != u32::MAX {
+                break;
+            }
+        }
+        if best.1 == u32::MAX {
+            far += 1;
+            continue;
+        }
+        let n = truth.normals[best.1 as usize];
+        let own = scene.normals[v];
+        // The true surface's normals may face the other way (its winding).
+        let s = if (0..3).map(|a| n[a] * own[a]).sum::<f32>() < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        scene.normals[v] = n.map(|c| s * c);
+    }
+    println!("normals from the truth: {far} vertices without a true vertex within 1 mm");
+    Ok(scene)
 }
