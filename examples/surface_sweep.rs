@@ -65,6 +65,11 @@ struct Opts {
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.len() < 3 {
+        anyhow::bail!(
+            "usage: surface_sweep CASE MODEL POSES_DIR [key=value ...] (see the file's docs)"
+        );
+    }
     let case_dir = PathBuf::from(&args[0]);
     let model = Model::load(&PathBuf::from(&args[1]))?;
     let poses_dir = PathBuf::from(&args[2]);
@@ -122,7 +127,8 @@ fn main() -> anyhow::Result<()> {
                     Some(s * f64::from(h.t))
                 })
                 .min_by(|a, b| a.abs().total_cmp(&b.abs()))?;
-            // Frames that see the vertex, closest first.
+            // Frames that see the vertex, nearest (distance over the root of the incidence's
+            // cosine: near and frontal) first.
             let mut seeing: Vec<(f64, usize)> = (0..frames.len())
                 .filter_map(|f| {
                     let d = x0 - centres[f];
