@@ -560,3 +560,62 @@ fn calibrated_new_views_reflect_their_own_light() {
     );
     assert!(reflected[1] > 1.3 * reflected[0], "{reflected:?}");
 }
+
+/// Where the reference is saturated it cannot show the surface: the unsaturated score leaves
+/// those pixels out and equals the PSNR over the others alone (computed here directly), while
+/// the score over every pixel pays for them.
+#[test]
+fn evaluate_scores_the_unsaturated_reference_pixels_apart() {
+    let (w, h) = (40u32, 30u32);
+    let n = (w * h) as usize;
+    let mut render = Frame::new(w, h);
+    let mut truth = Frame::new(w, h);
+    let mut saturated = vec![false; n];
+    for i in 0..n {
+        let base = 0.1 + 0.5 * ((i * 13 % 97) as f32 / 97.0);
+        for k in 0..3 {
+            render.rgb[3 * i + k] = base;
+            // A small error everywhere, and a band the reference's exposure clips.
+            truth.rgb[3 * i + k] = base * (1.0 + 0.02 * (((i + k) % 5) as f32 - 2.0));
+        }
+        if (i as u32 % w) < 10 {
+            truth.rgb[3 * i..3 * i + 3].copy_from_slice(&[1.0; 3]);
+            saturated[i] = true;
+        }
+    }
+    let all = vec![true; n];
+    let s = evaluate_methods(
+        &[(
+            "m".into(),
+            vec![MaskedImage {
+                frame: render.clone(),
+                mask: all.clone(),
+            }],
+        )],
+        &[MaskedImage {
+            frame: truth.clone(),
+            mask: all.clone(),
+        }],
+        &["v.png".to_string()],
+    )
+    .unwrap();
+    let v = &s[0].views[0];
+    assert_eq!(v.pixels, n);
+    assert_eq!(v.unsaturated_pixels, n - 10 * h as usize);
+    // The same PSNR from the unsaturated pixels alone, at the gain the evaluation fitted.
+    let keep: Vec<usize> = (0..n).filter(|&i| !saturated[i]).collect();
+    let se: f64 = keep
+        .iter()
+        .flat_map(|&i| (0..3).map(move |k| 3 * i + k))
+        .map(|j| {
+            let r = linear_to_srgb((render.rgb[j] as f64 * s[0].gain[j % 3]) as f32) as f64;
+            let t = linear_to_srgb(truth.rgb[j]) as f64;
+            (r - t) * (r - t)
+        })
+        .sum();
+    let expected = 10.0 * (1.0 / (se / (3 * keep.len()) as f64)).log10();
+    let got = v.unsaturated_psnr_db.unwrap();
+    assert!((got - expected).abs() < 1e-6, "{got} vs {expected}");
+    assert!(got > v.psnr_db.unwrap() + 3.0, "{got} vs {:?}", v.psnr_db);
+    assert!((s[0].mean_unsaturated_psnr_db - got).abs() < 1e-12);
+}

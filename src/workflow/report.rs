@@ -253,12 +253,15 @@ fn new_views_section(html: &mut String, fig: &NewViewsFigure, tmp: &Path) -> Res
         fig.caption
     );
     if !fig.scores.is_empty() {
-        html.push_str("<table><tr><th>method</th><th>mean PSNR (dB)</th><th>mean SSIM</th></tr>");
+        html.push_str(
+            "<table><tr><th>method</th><th>mean PSNR (dB)</th><th>mean SSIM</th>\
+             <th>mean PSNR where the reference is not saturated (dB)</th></tr>",
+        );
         for s in &fig.scores {
             let _ = write!(
                 html,
-                "<tr><td style=\"text-align:left\">{}</td><td>{:.2}</td><td>{:.4}</td></tr>",
-                s.method, s.mean_psnr_db, s.mean_ssim
+                "<tr><td style=\"text-align:left\">{}</td><td>{:.2}</td><td>{:.4}</td><td>{:.2}</td></tr>",
+                s.method, s.mean_psnr_db, s.mean_ssim, s.mean_unsaturated_psnr_db
             );
         }
         html.push_str("</table>");

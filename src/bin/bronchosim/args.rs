@@ -61,7 +61,8 @@ pub enum Command {
     /// DIR/flythrough.mp4.
     Flythrough(FlythroughArgs),
     /// Score rendered views against reference images: PSNR and SSIM on the pixels both cover,
-    /// after one least-squares gain per channel over all views.
+    /// after one least-squares gain per channel over all views; and the PSNR on those where the
+    /// reference is not saturated.
     Evaluate(EvaluateArgs),
     /// Write a self-contained browser viewer (index.html, works from file://) to fly through
     /// the model, lit as the bronchoscope lights it.
