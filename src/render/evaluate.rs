@@ -190,47 +190,34 @@ pub fn evaluate_methods(
 
 /// A plain-text table of scores: per view, each method's PSNR and SSIM, then the means.
 pub fn scores_text(scores: &[MethodScore]) -> String {
-    let mut s = String::new();
     let fmt = |x: Option<f64>, d: usize| x.map_or("-".to_string(), |v| format!("{v:.d$}"));
-    s.push_str(&format!("{:<28}", "view"));
-    for m in scores {
-        s.push_str(&format!(
-            " {:>14} {:>8}",
-            format!("{} PSNR", m.method),
-            "SSIM"
-        ));
-    }
-    s.push('\n');
-    let n = scores.first().map_or(0, |m| m.views.len());
-    for v in 0..n {
-        s.push_str(&format!("{:<28}", scores[0].views[v].name));
+    // One line: the label, then each method's two cells.
+    let row = |s: &mut String, label: &str, cells: &dyn Fn(&MethodScore) -> (String, String)| {
+        s.push_str(&format!("{label:<28}"));
         for m in scores {
-            let vs = &m.views[v];
-            s.push_str(&format!(
-                " {:>14} {:>8}",
-                fmt(vs.psnr_db, 2),
-                fmt(vs.ssim, 4)
-            ));
+            let (a, b) = cells(m);
+            s.push_str(&format!(" {a:>14} {b:>8}"));
         }
         s.push('\n');
+    };
+    let mut s = String::new();
+    row(&mut s, "view", &|m| {
+        (format!("{} PSNR", m.method), "SSIM".into())
+    });
+    let n = scores.first().map_or(0, |m| m.views.len());
+    for v in 0..n {
+        row(&mut s, &scores[0].views[v].name, &|m| {
+            (fmt(m.views[v].psnr_db, 2), fmt(m.views[v].ssim, 4))
+        });
     }
-    s.push_str(&format!("{:<28}", "mean"));
-    for m in scores {
-        s.push_str(&format!(
-            " {:>14} {:>8}",
+    row(&mut s, "mean", &|m| {
+        (
             format!("{:.2}", m.mean_psnr_db),
-            format!("{:.4}", m.mean_ssim)
-        ));
-    }
-    s.push('\n');
-    s.push_str(&format!("{:<28}", "mean, reference unsaturated"));
-    for m in scores {
-        s.push_str(&format!(
-            " {:>14} {:>8}",
-            format!("{:.2}", m.mean_unsaturated_psnr_db),
-            "-"
-        ));
-    }
-    s.push('\n');
+            format!("{:.4}", m.mean_ssim),
+        )
+    });
+    row(&mut s, "mean, reference unsaturated", &|m| {
+        (format!("{:.2}", m.mean_unsaturated_psnr_db), "-".into())
+    });
     s
 }
