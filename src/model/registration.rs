@@ -132,17 +132,18 @@ impl PoseRegistration {
             return String::new();
         };
         let start = self.started_from();
-        match self.kept_given() {
-            true => format!(
+        if self.kept_given() {
+            format!(
                 "The {start} poses were kept, so every correction is zero: with the refined \
                  poses held-out frames are predicted at {refined:.2} dB, with the {start} ones \
                  at {given:.2} dB, and the refined poses replace them only when they predict \
                  held-out frames better by a margin (1 dB unless the build is told otherwise)."
-            ),
-            false => format!(
+            )
+        } else {
+            format!(
                 "The refined poses are used: with them held-out frames are predicted at \
                  {refined:.2} dB, with the {start} ones at {given:.2} dB."
-            ),
+            )
         }
     }
 
