@@ -9,12 +9,22 @@
 //! as well as the old ones (an alias fits its frames about as well as the truth, or it would
 //! not have been found).
 //!
+//! A round judges the jumps twice: in its own corrections (from the poses it started at),
+//! then in the corrections from the tracker's poses. A run that an earlier round moved a ring
+//! away starts this round there, and this round's own corrections join its neighbours'
+//! without a jump; only from the tracker's poses does it jump.
+//!
 //! Measured on the demo phantom with 3 mm / 4 deg tracker drift: frames 2-17 (the trachea)
 //! ended 3.9-4.2 mm behind along the view, one ring period, between two well-placed runs;
-//! realigned, they end within 0.4 mm (BENCHMARKS.md).
+//! realigned, they end within 0.4 mm (BENCHMARKS.md). With 5 mm / 6 deg, the first round
+//! put frames 0-15 a ring behind; judged from each round's start poses no later round saw a
+//! jump, and frames 2-12 were kept there, converged, 4.0-4.1 mm off (new views 28.64 dB);
+//! judged from the tracker's poses as well, the second round realigns them (within 0.2 mm;
+//! new views 29.96-30.09 dB in two builds; BENCHMARKS.md, session 45).
 
 use super::frame::FrameRegistration;
-use super::pose::{apply_delta, PoseDelta};
+use super::pose::{apply_delta, delta_between, PoseDelta};
+use crate::camera::pose::camera_centre;
 use crate::math::Affine;
 use crate::Result;
 
@@ -91,14 +101,18 @@ fn runs(
 /// Register again, from the correction of the runs next to it, every run of frames whose
 /// corrections jump where it meets them (see the module docs). The longest run is trusted;
 /// the others are taken in turn outward from it, each set against the settled run on its
-/// inner side. `results[f].correction` is relative to `given[f]`; `usable[f]` says which
-/// frames converged; `numbers` are the frames' positions in the video (empty: consecutive);
-/// `register(jobs)` registers each job's frame from its start pose, and `fits(r)` says whether
-/// a result converged to a cost like the video's. Returns the frames whose results were
-/// replaced.
+/// inner side. `results[f].correction` is relative to `started[f]`, the pose this round
+/// started the frame at; the jumps are judged in the corrections from `judged_from[f]` to the
+/// results' poses (the round's start, or the tracker's poses: see the module docs).
+/// `usable[f]` says which frames converged; `numbers` are the frames' positions in the video
+/// (empty: consecutive); `register(jobs)` registers each job's frame from its start pose, and
+/// `fits(r)` says whether a result converged to a cost like the video's. Returns the frames
+/// whose results were replaced.
+#[allow(clippy::too_many_arguments)]
 pub fn realign_blocks<R, F>(
     results: &mut [FrameRegistration],
-    given: &[Affine],
+    started: &[Affine],
+    judged_from: &[Affine],
     usable: &[bool],
     numbers: &[usize],
     opts: &BlockOptions,
@@ -116,8 +130,9 @@ where
     } else {
         &consecutive
     };
+    let total = |f: usize, r: &FrameRegistration| delta_between(&judged_from[f], &r.pose);
     let runs = runs(
-        &results.iter().map(|r| r.correction).collect::<Vec<_>>(),
+        &(0..n).map(|f| total(f, &results[f])).collect::<Vec<_>>(),
         usable,
         numbers,
         opts,
@@ -145,23 +160,38 @@ where
             } else {
                 run[0]
             };
-            let (r, m) = (&results[reference].correction, &results[meets].correction);
+            let (r, m) = (
+                total(reference, &results[reference]),
+                total(meets, &results[meets]),
+            );
             let (nr, nm) = (numbers[reference], numbers[meets]);
             let jumped = |m: &PoseDelta| match towards_start {
-                true => jumps(m, r, nm, nr, opts),
-                false => jumps(r, m, nr, nm, opts),
+                true => jumps(m, &r, nm, nr, opts),
+                false => jumps(&r, m, nr, nm, opts),
             };
-            if jumped(m) {
-                let correction = *r;
+            if jumped(&m) {
+                // Each frame starts turned as this round turned the settled frame, at the
+                // centre the tracker's continuity puts it: that frame's correction from
+                // `judged_from`. (Started where the run ended instead, shifted alone, the demo
+                // phantom with 3 mm / 4 deg drift kept frames 0-25 rolled 1.2-1.9 deg: 28.89
+                // dB new views against 31.78 dB.)
+                let turn = results[reference].correction.rotation;
                 let jobs: Vec<(usize, Affine)> = run
                     .iter()
-                    .map(|&f| (f, apply_delta(&given[f], &correction)))
+                    .map(|&f| {
+                        let centre = camera_centre(&judged_from[f]).coords + r.translation_mm;
+                        let step = PoseDelta {
+                            translation_mm: centre - camera_centre(&started[f]).coords,
+                            rotation: turn,
+                        };
+                        (f, apply_delta(&started[f], &step))
+                    })
                     .collect();
                 let fresh = register(&jobs)?;
                 let old_cost: f64 = run.iter().map(|&f| results[f].cost_after).sum();
                 let new_cost: f64 = fresh.iter().map(|r| r.cost_after).sum();
                 let k = run.iter().position(|&f| f == meets).unwrap_or(0);
-                let joins = !jumped(&fresh[k].correction);
+                let joins = !jumped(&total(meets, &fresh[k]));
                 if joins && fresh.iter().all(&fits) && new_cost <= opts.cost_factor * old_cost {
                     for (&f, r) in run.iter().zip(fresh) {
                         results[f] = r;
@@ -185,7 +215,6 @@ mod tests {
     use super::*;
     use crate::math::Vector3;
     use crate::registration::frame::FrameStatus;
-    use crate::registration::pose::delta_between;
 
     /// Frames along +z, 2 mm apart, given poses exact.
     fn given(n: usize) -> Vec<Affine> {
@@ -250,6 +279,7 @@ mod tests {
         let replaced = realign_blocks(
             &mut results,
             &given,
+            &given,
             &vec![true; n],
             &[],
             &BlockOptions::default(),
@@ -271,6 +301,53 @@ mod tests {
                 (d.translation_mm - Vector3::new(0.1, 0.0, 0.0)).norm() < 1e-9,
                 "{d:?}"
             );
+        }
+    }
+
+    #[test]
+    fn a_run_an_earlier_round_moved_is_judged_from_the_tracker() {
+        // Frames 3-9 started this round a ring away already: their corrections from there are
+        // nothing and join their neighbours', but from the tracker's poses they jump.
+        let given = given(30);
+        let started: Vec<Affine> = (0..30)
+            .map(|f| shifted(&given[f], if (3..10).contains(&f) { -4.0 } else { 0.0 }))
+            .collect();
+        let mut results: Vec<FrameRegistration> =
+            started.iter().map(|p| result(p, *p, 1.0)).collect();
+        let register = |jobs: &[(usize, Affine)]| -> Result<Vec<FrameRegistration>> {
+            Ok(jobs
+                .iter()
+                .map(|(f, s)| result(&started[*f], *s, 1.0))
+                .collect())
+        };
+        let fits = |r: &FrameRegistration| r.cost_after < 2.0;
+        let opts = BlockOptions::default();
+        let usable = [true; 30];
+        let own = realign_blocks(
+            &mut results,
+            &started,
+            &started,
+            &usable,
+            &[],
+            &opts,
+            register,
+            fits,
+        );
+        assert!(own.unwrap().is_empty());
+        let replaced = realign_blocks(
+            &mut results,
+            &started,
+            &given,
+            &usable,
+            &[],
+            &opts,
+            register,
+            fits,
+        );
+        assert_eq!(replaced.unwrap(), (3..10).collect::<Vec<_>>());
+        for (f, r) in results.iter().enumerate() {
+            let off = delta_between(&shifted(&given[f], 0.0), &r.pose);
+            assert!(off.mm() < 1e-9, "frame {f}: {off:?}");
         }
     }
 

@@ -47,6 +47,12 @@ pub struct VideoOptions {
     /// Frames whose given pose is exact (the trusted first frame of a video registered
     /// without a tracker): kept there, and the drift pinned at them.
     pub anchored: Vec<usize>,
+    /// The poses the video came with, whose error is a tracker's smooth drift: the runs of
+    /// `blocks` are judged by their corrections from these too, not only from the poses this
+    /// registration starts at, which after an earlier round are not smooth in their error (a
+    /// run that round put a ring away starts there, and its own corrections join). Empty: from
+    /// the start poses alone.
+    pub tracker_poses: Vec<Affine>,
 }
 
 impl Default for VideoOptions {
@@ -61,6 +67,7 @@ impl Default for VideoOptions {
             progress: None,
             blocks: None,
             anchored: Vec::new(),
+            tracker_poses: Vec::new(),
         }
     }
 }
@@ -272,15 +279,26 @@ pub fn refine_video(
     if let Some(block_opts) = &opts.blocks {
         let g = gate(&res);
         let ok: Vec<bool> = res.iter().map(|r| good(r, g)).collect();
-        let replaced = realign_blocks(
-            &mut res,
-            poses,
-            &ok,
-            &opts.frame_numbers,
-            block_opts,
-            run_jobs,
-            |r| good(r, g),
-        )?;
+        // Judged in this round's own corrections, then in those from the tracker's poses (see
+        // `blocks`).
+        let mut replaced = Vec::new();
+        for judged_from in [poses, &opts.tracker_poses[..]] {
+            if judged_from.len() != n {
+                continue;
+            }
+            replaced.extend(realign_blocks(
+                &mut res,
+                poses,
+                judged_from,
+                &ok,
+                &opts.frame_numbers,
+                block_opts,
+                run_jobs,
+                |r| good(r, g),
+            )?);
+        }
+        replaced.sort_unstable();
+        replaced.dedup();
         realigned = replaced.len();
         for f in replaced {
             restarted[f] = true;

@@ -806,6 +806,22 @@ fn anchored_frames(scene: &BuildScene, opts: &BuildOptions) -> Vec<usize> {
     }
 }
 
+/// The poses a tracker gave (the case's, with `--poses refine`), from which the rounds judge
+/// the jumps of runs of frames as well as from the poses each starts at (see
+/// `registration::blocks`); none without a tracker (`--poses first`: the case's poses are the
+/// first frame's, repeated).
+fn tracker_poses(scene: &BuildScene, opts: &BuildOptions) -> Vec<Affine> {
+    match opts.poses {
+        PosesMode::Refine => scene
+            .case
+            .poses
+            .iter()
+            .map(|p| p.pose.camera_to_world)
+            .collect(),
+        PosesMode::First | PosesMode::Fixed => Vec::new(),
+    }
+}
+
 /// Frames on each side whose corrections a failed first round's restart takes the median of
 /// (see [`consensus_poses`]): a tracker's drift changes little over seven frames, and three
 /// outliers of seven are outvoted.
@@ -962,6 +978,7 @@ fn run_round(
                 // second 29.43 dB, never 26.85 dB; BENCHMARKS.md).
                 blocks: (round_index > 0).then(BlockOptions::default),
                 anchored: anchored_frames(scene, opts),
+                tracker_poses: tracker_poses(scene, opts),
                 ..VideoOptions::default()
             },
             frame,
