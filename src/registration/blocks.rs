@@ -170,11 +170,11 @@ where
                 false => jumps(&r, m, nr, nm, opts),
             };
             if jumped(&m) {
-                // Each frame starts turned as this round turned the settled frame, at the
-                // centre the tracker's continuity puts it: that frame's correction from
-                // `judged_from`. (Started where the run ended instead, shifted alone, the demo
-                // phantom with 3 mm / 4 deg drift kept frames 0-25 rolled 1.2-1.9 deg: 28.89
-                // dB new views against 31.78 dB.)
+                // Each frame starts turned as this round turned the settled frame, its centre
+                // at its `judged_from` pose's moved as the settled frame's is from its own: the
+                // tracker's continuity. (Started where the run ended instead, shifted alone,
+                // the demo phantom with 3 mm / 4 deg drift kept frames 0-25 rolled 1.2-1.9
+                // deg: 28.89 dB new views against 31.78 dB.)
                 let turn = results[reference].correction.rotation;
                 let jobs: Vec<(usize, Affine)> = run
                     .iter()
