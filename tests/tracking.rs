@@ -248,6 +248,48 @@ fn blurred_frames_are_flagged_and_not_tracked_against() {
 }
 
 #[test]
+fn sharp_frames_at_the_carina_are_not_flagged_blurred() {
+    // The seed-7 phantom (no frame blurred) at 128x128, its first 60 frames: the scope reaches
+    // the carina at frame 50. The model the tracker judges a frame's sharpness against is
+    // fitted again every 8 frames; a fit that predicted the frames near the carina sharper
+    // than the earlier fits predicted theirs put sharp frames under the recent median's share,
+    // and frames 56, 57 and 58 were flagged: they kept their predicted poses, 2.3-4.5 deg off.
+    // Against the frame before it a sharp frame keeps its detail, so they are not.
+    let tmp = tempfile::tempdir().unwrap();
+    let case_dir = tmp.path().join("case");
+    let opts = PhantomOptions {
+        seed: 7,
+        frames: 80,
+        width: 128,
+        height: 128,
+        novel_views: 1,
+        ..Default::default()
+    };
+    let (truth, blurred) = untracked_phantom_of(&case_dir, &opts, 60);
+    assert!(blurred.is_empty());
+    let out = tmp.path().join("reg");
+    let s = register_command(&case_dir, &out, &tracking_alone()).unwrap();
+    let t = s.registration.tracking.clone().unwrap();
+    let flagged: Vec<usize> = (0..60)
+        .filter(|&f| s.registration.frames[f].status == "blurred")
+        .collect();
+    let tracked = poses_of(&read_poses(&out.join("poses.json"), &case_dir).unwrap());
+    let (errors, _, _) = tracked_errors(&tracked, &truth);
+    println!(
+        "flagged {flagged:?}; lost at {:?}; frames 48-59 {:?}",
+        t.first_lost,
+        &errors[48..]
+    );
+    // Measured: none flagged, frames 48-59 within 0.58 mm and 2.2 deg. (Tracking alone at
+    // this size: frames 32-42 turn up to 34 deg about their view axes in the trachea and come
+    // back; the rounds of a build refine them.)
+    assert_eq!(flagged, Vec::<usize>::new());
+    assert_eq!(t.first_lost, None);
+    let past = &errors[48..];
+    assert!(past.iter().all(|e| e.0 <= 1.0 && e.1 <= 3.0), "{past:?}");
+}
+
+#[test]
 fn a_blackout_of_four_frames_is_crossed() {
     let tmp = tempfile::tempdir().unwrap();
     let case_dir = tmp.path().join("case");

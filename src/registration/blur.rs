@@ -43,6 +43,32 @@ pub fn sharpness_at_pose(
     sharpness_against(frame, &predicted, &use_px, w * h / 20)
 }
 
+/// `frame`'s own [`gradient_energies`] on the pixels it shows usably (`opts`: neither dark
+/// nor saturated, within `mask`), two pixels inside their edges; `None` with fewer than a
+/// twentieth of its pixels.
+pub fn frame_energies(
+    frame: &Frame,
+    mask: Option<&[bool]>,
+    opts: &RegistrationOptions,
+) -> Option<[f64; 4]> {
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    let use_px: Vec<bool> = (0..w * h)
+        .map(|k| opts.comparable(&frame.rgb[3 * k..3 * k + 3]) && mask.is_none_or(|m| m[k]))
+        .collect();
+    let use_px = erode(&erode(&use_px, w, h), w, h);
+    gradient_energies(frame, &use_px, w * h / 20)
+}
+
+/// The smallest of the four directions' ratios of a frame's [`frame_energies`] to an earlier
+/// frame's: motion blur takes a frame's detail along one direction, while the next frame of
+/// a sharp video shows about as much as the one before it.
+pub fn sharpness_against_frame(frame: &[f64; 4], earlier: &[f64; 4]) -> Option<f64> {
+    (0..4)
+        .filter(|&k| earlier[k] > 0.0)
+        .map(|k| frame[k] / earlier[k])
+        .min_by(f64::total_cmp)
+}
+
 /// `keep` without the pixels next to one it does not keep (3x3).
 fn erode(keep: &[bool], w: usize, h: usize) -> Vec<bool> {
     (0..w * h)
@@ -216,5 +242,29 @@ mod tests {
         // Too few pixels: no verdict.
         let few: Vec<bool> = (0..64 * 64).map(|i| i < 64).collect();
         assert!(sharpness_against(&sharp, &sharp, &few, 100).is_none());
+    }
+
+    #[test]
+    fn a_smeared_frame_keeps_under_half_the_detail_of_the_sharp_frame_before_it() {
+        let sharp = detailed();
+        let opts = RegistrationOptions::default();
+        let before = frame_energies(&sharp, None, &opts).unwrap();
+        // The next sharp frame: the scene two pixels further along.
+        let mut next = Frame::new(64, 64);
+        for y in 0..64 {
+            for x in 0..64 {
+                let (i, j) = (3 * (y * 64 + x), 3 * (y * 64 + (x + 2).min(63)));
+                next.rgb[i..i + 3].copy_from_slice(&sharp.rgb[j..j + 3]);
+            }
+        }
+        let moved = frame_energies(&next, None, &opts).unwrap();
+        let kept = sharpness_against_frame(&moved, &before).unwrap();
+        assert!(kept > 0.8, "{kept}");
+        let smeared = frame_energies(&smeared(&sharp, 4), None, &opts).unwrap();
+        let lost = sharpness_against_frame(&smeared, &before).unwrap();
+        assert!(lost < 0.5, "{lost}");
+        // Outside the mask nothing is compared.
+        let none = vec![false; 64 * 64];
+        assert!(frame_energies(&sharp, Some(&none), &opts).is_none());
     }
 }

@@ -15,7 +15,7 @@
 //! count towards the loss; the frame after a gap is tried from more starts (the scope may
 //! have stopped, gone on, or turned while unseen).
 
-use super::blur::sharpness_at_pose;
+use super::blur::{frame_energies, sharpness_against_frame, sharpness_at_pose};
 use super::chroma::ChromaAlbedo;
 use super::frame::RegistrationOptions;
 use super::frame::{FrameObs, FrameRegistrar, FrameRegistration, FrameStatus};
@@ -76,6 +76,18 @@ pub struct TrackOptions {
     /// video with a fifth of its frames motion-blurred 6-45 deg off in its last frames
     /// (BENCHMARKS.md, session 36).
     pub blurred_below: f64,
+    /// A frame under [`Self::blurred_below`] is flagged only when, along some direction, its
+    /// own detail ([`super::blur::frame_energies`]) is also under this share of the last
+    /// accepted frame's (0: the first test alone). The model the sharpness is judged against is
+    /// fitted again every few frames, and the recent frames' median was judged against older
+    /// fits: where a new fit predicts the frames sharper (near walls first seen from afar),
+    /// sharp frames fell under it. On `phantom --seed 7` (no frame blurred) frames 50-57, at
+    /// the carina, were flagged (1.5-1.9 against a median of 2.76), the tracker went on from
+    /// predicted poses and frames 60-79 ended 3-16 deg off in roll. Against the last accepted
+    /// frame the sharp frames the first test flags there keep 0.99 of its detail, the demo's
+    /// motion-blurred frames (`--motion-blur-share 0.2`) 0.18-0.46 (BENCHMARKS.md, session
+    /// 46).
+    pub blurred_against_last_below: f64,
     /// Accepted frames whose sharpness makes that median (at least 4 are needed to judge).
     pub sharpness_window: usize,
 }
@@ -94,6 +106,7 @@ impl Default for TrackOptions {
             geometry_from_level: 2,
             relocalise_deg: 10.0,
             blurred_below: 0.7,
+            blurred_against_last_below: 0.5,
             sharpness_window: 9,
         }
     }
@@ -449,8 +462,19 @@ impl<'a> Tracker<'a> {
             _ => None,
         };
         let reference = state.recent_median(&state.sharpness, f, o.sharpness_window, 4);
+        // The frame's detail against the last accepted frame's, asked only of a frame the
+        // model's prediction finds blurred.
+        let against_last = || -> Option<f64> {
+            let last = *state.accepted_before(f).last()?;
+            let ro = &self.reg.opts;
+            let now = frame_energies(&frames[f], mask, ro)?;
+            sharpness_against_frame(&now, &frame_energies(&frames[last], mask, ro)?)
+        };
         if let (Some(s), Some(m)) = (sharpness, reference) {
-            if s < o.blurred_below * m {
+            if s < o.blurred_below * m
+                && (o.blurred_against_last_below <= 0.0
+                    || against_last().is_none_or(|r| r < o.blurred_against_last_below))
+            {
                 return Ok(FrameTry {
                     accepted: false,
                     status: FrameStatus::Blurred,
