@@ -247,8 +247,8 @@ pub struct BuildArgs {
     #[arg(long, value_enum, default_value_t = build_defaults().poses)]
     pub poses: PosesMode,
     /// With `--poses first`: trust the first frame's pose exactly (e.g. from another
-    /// registration) instead of refining it against the CT before tracking, as a pose aligned
-    /// by hand needs.
+    /// registration): it is neither refined against the CT before tracking, as a pose aligned
+    /// by hand needs, nor by the registration's rounds after it.
     #[arg(long)]
     pub trust_first_pose: bool,
     /// Most rounds of the registration (light + texture, then every frame's pose); rounds
@@ -308,8 +308,8 @@ pub struct RegisterArgs {
     #[arg(long, value_enum, default_value_t = PosesMode::Refine)]
     pub poses: PosesMode,
     /// With `--poses first`: trust the first frame's pose exactly (e.g. from another
-    /// registration) instead of refining it against the CT before tracking, as a pose aligned
-    /// by hand needs.
+    /// registration): it is neither refined against the CT before tracking, as a pose aligned
+    /// by hand needs, nor by the registration's rounds after it.
     #[arg(long)]
     pub trust_first_pose: bool,
     /// The calibrated light of a model built with the same bronchoscope (its folder or its
