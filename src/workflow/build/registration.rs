@@ -688,7 +688,7 @@ fn joint_stage(
 ) -> Result<Option<RoundSummary>> {
     let started = Instant::now();
     let n = scene.frame_count();
-    let anchored = anchored_frames(&scene.frame_numbers, opts);
+    let anchored = anchored_frames(scene, opts);
     // A frame that fits worse than the rest often does so because the frames next to it sit
     // away from the truth (the end of the demo video at 3 mm / 4 deg: frames 74-75 flagged,
     // 76-79 kept 1 mm ahead along their views); with its neighbours moved it may fit.
@@ -797,17 +797,33 @@ fn set_poses(scene: &mut BuildScene, poses: Vec<Affine>, opts: &BuildOptions) {
     scene.cache = DepthCache::new(scene.frame_count(), opts.depth_cache_bytes, scene.level);
 }
 
-/// The frames whose given pose is exact: the first frame of the video, when it is among the
-/// scene's, with `--poses first --trust-first-pose`. A first pose the tracking refined against
-/// the CT first (the default) is one frame's estimate, and the rounds refine it with the
-/// others: held there, it pulled its neighbours to it (`phantom --seed 7`, first pose 1.7 mm /
-/// 1.8 deg off, refined to 1.0 mm / 3.3 deg: held, frames 0-2 ended 0.4-1.0 mm / 1.1-3.3 deg
-/// off and new views scored 30.12 dB; refined with the others, every frame of 0-75 within 1
-/// mm and 1 deg, 30.62 dB; the demo's case, whose first pose is exact, 32.78 / 32.81 dB;
-/// BENCHMARKS.md, session 46).
-fn anchored_frames(frame_numbers: &[usize], opts: &BuildOptions) -> Vec<usize> {
+/// The frames whose given pose is exact ([`first_frame_held`]).
+fn anchored_frames(scene: &BuildScene, opts: &BuildOptions) -> Vec<usize> {
+    // A held frame's zero correction may leave rounding in its pose; a refinement kept moved
+    // it far more (it fitted the frame 10 % better).
+    let at_given = match (scene.poses.first(), scene.case.poses.first()) {
+        (Some(p), Some(given)) => {
+            let moved = delta_between(&given.pose.camera_to_world, p);
+            moved.mm() < 1e-6 && moved.deg() < 1e-6
+        }
+        _ => false,
+    };
+    first_frame_held(&scene.frame_numbers, at_given, opts)
+}
+
+/// Without a tracker (`--poses first`), the video's first frame when it is among the scene's
+/// (`frame_numbers`) and still at the pose the case gives (`at_given`): given exactly
+/// (`--trust-first-pose`), or agreeing with the CT as far as that frame alone can tell (the
+/// tracking's refinement of it did not fit 10 % better). Held, the first pose anchors the video
+/// (session 29: ATM_224 / 305 / 384 from their exact first poses, 28.95 / 28.87 / 25.00 dB ->
+/// 29.22 / 29.63 / 25.35 dB). A first pose the refinement moved is one frame's estimate, and
+/// the rounds refine it with the others: held, it pulled its neighbours to it (`phantom --seed
+/// 7`, first pose 1.7 mm / 1.8 deg off, refined to 1.0 mm / 3.3 deg: frames 0-2 ended 0.4-1.0
+/// mm / 1.1-3.3 deg off and new views scored 30.12 dB; refined with the others, frames 0-75
+/// within 1 mm and 1 deg, 30.62 dB; BENCHMARKS.md, session 46).
+fn first_frame_held(frame_numbers: &[usize], at_given: bool, opts: &BuildOptions) -> Vec<usize> {
     match (opts.poses, frame_numbers.first()) {
-        (PosesMode::First, Some(0)) if !opts.tracking.refine_first => vec![0],
+        (PosesMode::First, Some(0)) if at_given => vec![0],
         _ => Vec::new(),
     }
 }
@@ -983,7 +999,7 @@ fn run_round(
                 // 3 mm / 4 deg: realigning from the first round 25.87 dB new views, from the
                 // second 29.43 dB, never 26.85 dB; BENCHMARKS.md).
                 blocks: (round_index > 0).then(BlockOptions::default),
-                anchored: anchored_frames(&scene.frame_numbers, opts),
+                anchored: anchored_frames(scene, opts),
                 tracker_poses: tracker_poses(scene, opts),
                 ..VideoOptions::default()
             },
@@ -1283,32 +1299,28 @@ fn round3(x: f64) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use super::{anchored_frames, round_failed, tracked_statuses};
+    use super::{first_frame_held, round_failed, tracked_statuses};
     use crate::math::Affine;
     use crate::registration::{FrameStatus, TrackState};
     use crate::workflow::build::{BuildOptions, PosesMode};
 
     #[test]
-    fn only_a_trusted_first_pose_is_held_by_the_rounds() {
-        let first = |refine_first: bool| {
-            let mut opts = BuildOptions {
-                poses: PosesMode::First,
-                ..Default::default()
-            };
-            opts.tracking.refine_first = refine_first;
-            opts
+    fn a_first_frame_at_its_given_pose_is_held_by_the_rounds() {
+        let first = BuildOptions {
+            poses: PosesMode::First,
+            ..Default::default()
         };
         let video: Vec<usize> = (0..10).collect();
-        assert_eq!(anchored_frames(&video, &first(false)), [0]);
-        // Refined against the CT before tracking: one frame's estimate, refined again.
-        assert!(anchored_frames(&video, &first(true)).is_empty());
+        assert_eq!(first_frame_held(&video, true, &first), [0]);
+        // Moved by the tracking's refinement against the CT: one frame's estimate.
+        assert!(first_frame_held(&video, false, &first).is_empty());
         // The video's first frame left out: no frame's pose is given.
-        assert!(anchored_frames(&video[2..], &first(false)).is_empty());
+        assert!(first_frame_held(&video[2..], true, &first).is_empty());
         let tracker = BuildOptions {
             poses: PosesMode::Refine,
             ..Default::default()
         };
-        assert!(anchored_frames(&video, &tracker).is_empty());
+        assert!(first_frame_held(&video, true, &tracker).is_empty());
     }
 
     #[test]

@@ -66,8 +66,8 @@ pub struct TrackingOptions {
     /// many held to its end (BENCHMARKS.md, session 30).
     pub tracked_per_used: usize,
     /// Refine the first frame's given pose against the CT's geometry before tracking from it
-    /// ([`refine_first_pose`]), and with the other frames in the rounds after the tracking
-    /// (off: trusted exactly and held by the rounds, `--trust-first-pose`). A first pose
+    /// ([`refine_first_pose`]; off: trusted exactly, `--trust-first-pose`). The rounds after
+    /// the tracking hold the first frame only where it is still at its given pose. A first pose
     /// aligned by hand is rarely better than a millimetre and a degree, and tracking follows
     /// its error. Demo phantom's video, first pose 1 mm / 1 deg off: trusted 0.53 deg median,
     /// 62 of 80 frames within 1 mm and 1 deg, new views 28.49 dB; refined 0.41 deg, 71, 29.24
