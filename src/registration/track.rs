@@ -81,12 +81,12 @@ pub struct TrackOptions {
     /// accepted frame's (0: the first test alone). The model the sharpness is judged against is
     /// fitted again every few frames, and the recent frames' median was judged against older
     /// fits: where a new fit predicts the frames sharper (near walls first seen from afar),
-    /// sharp frames fell under it. On `phantom --seed 7` (no frame blurred) frames 50-57, at
-    /// the carina, were flagged (1.5-1.9 against a median of 2.76), the tracker went on from
-    /// predicted poses and frames 60-79 ended 3-16 deg off in roll. Against the last accepted
-    /// frame the sharp frames the first test flags there keep 0.99 of its detail, the demo's
-    /// motion-blurred frames (`--motion-blur-share 0.2`) 0.18-0.46 (BENCHMARKS.md, session
-    /// 46).
+    /// sharp frames fell under it. On `phantom --seed 7` (no frame blurred) seven of frames
+    /// 50-57, at the carina, were flagged (1.5-1.9 against a median of 2.76), the tracker went
+    /// on from predicted poses and frames 60-79 ended 3-16 deg off in roll. Against the last
+    /// accepted frame the sharp frames the first test flags there keep 0.99 of its detail, the
+    /// demo's motion-blurred frames (`--motion-blur-share 0.2`) 0.18-0.46 (BENCHMARKS.md,
+    /// session 46).
     pub blurred_against_last_below: f64,
     /// Accepted frames whose sharpness makes that median (at least 4 are needed to judge).
     pub sharpness_window: usize,
