@@ -245,6 +245,33 @@ fn blurred_frames_are_flagged_and_not_tracked_against() {
     );
     assert!(flagged.iter().all(|&f| !s.registration.frames[f].used));
     assert_eq!(t.first_lost, None);
+
+    // The tracker's verdict serves the tracking; a frame it flags between two kept ones is
+    // refined by the rounds and left out only if the build's blur check, one model from the
+    // refined poses, finds it blurred too (a bronchus's wall seen from close looks blurred to
+    // the tracker's recent model). A stricter tracker here flags sharp frame 7 as well
+    // (measured with `registration_rounds` 0), which the rounds keep; with the tracker's
+    // verdict final it is left out.
+    let mut strict = BuildOptions {
+        registration_rounds: 2,
+        registration_joint: false,
+        ..tracking_alone()
+    };
+    strict.tracking.track.blurred_below = 0.9;
+    strict.tracking.track.blurred_against_last_below = 0.0;
+    let s = register_command(&case_dir, &tmp.path().join("rounds"), &strict).unwrap();
+    let left_out: Vec<usize> = (0..30)
+        .filter(|&f| !s.registration.frames[f].used)
+        .collect();
+    println!("strict tracker, then the rounds: left out {left_out:?}");
+    assert!(
+        left_out.iter().all(|f| blurred.contains(f)),
+        "a sharp frame left out: blurred {blurred:?}, left out {left_out:?}"
+    );
+    assert!(
+        2 * left_out.len() >= judged.len(),
+        "blurred {blurred:?}, left out {left_out:?}"
+    );
 }
 
 #[test]
