@@ -121,7 +121,7 @@ pub fn register_poses(
     };
     // The tracker's verdicts, which stand when its poses are kept.
     let tracked = statuses.clone();
-    let rejudged = match first {
+    let rejoined = match first {
         true => rejoin_blurred_between_kept(scene, &mut statuses, opts),
         false => Vec::new(),
     };
@@ -204,7 +204,7 @@ pub fn register_poses(
     };
     if blur_check.is_none() {
         // No check judged the frames the tracker found blurred: its verdict stands.
-        for &i in &rejudged {
+        for &i in &rejoined {
             statuses[i] = (FrameStatus::Blurred.name().to_string(), true);
         }
     }
