@@ -1288,9 +1288,10 @@ fn tracked_statuses(state: &TrackState) -> Vec<(String, bool)> {
         .collect()
 }
 
-/// The frames the tracker flagged `blurred` between two frames it kept: they join the
-/// rounds, each placed on the motion between those two ([`interpolate_flagged`]), and the
-/// build's blur check after the rounds decides whether they are left out.
+/// The frames the tracker flagged `blurred` between two frames it kept
+/// ([`blurred_between_kept`]): they join the rounds, each placed on the motion between those
+/// two ([`interpolate_flagged`]), and the build's blur check after the rounds decides whether
+/// they are left out.
 ///
 /// The tracker judges a frame against a model of the last few frames it kept, and a
 /// bronchus's smooth wall seen from a few millimetres holds as little detail against that
@@ -1323,14 +1324,15 @@ fn rejoin_blurred_between_kept(
     rejoined
 }
 
-/// The frames of `statuses` flagged `blurred` with a frame not flagged before and after them.
+/// The frames of `statuses` in runs of flagged frames, all `blurred`, between two frames not
+/// flagged. A run with a frame flagged for another reason (an outlier, a lost track) may span
+/// a motion the frames around it do not say.
 fn blurred_between_kept(statuses: &[(String, bool)]) -> Vec<usize> {
     let kept: Vec<usize> = (0..statuses.len()).filter(|&i| !statuses[i].1).collect();
-    let (Some(&first), Some(&last)) = (kept.first(), kept.last()) else {
-        return Vec::new();
-    };
-    (first + 1..last)
-        .filter(|&i| statuses[i].1 && statuses[i].0 == FrameStatus::Blurred.name())
+    let blurred = |i: usize| statuses[i].0 == FrameStatus::Blurred.name();
+    kept.windows(2)
+        .filter(|w| (w[0] + 1..w[1]).all(blurred))
+        .flat_map(|w| w[0] + 1..w[1])
         .collect()
 }
 
@@ -1369,16 +1371,16 @@ mod tests {
         let statuses = [
             s("given", false),
             s("blurred", true),
-            s("converged", false),
             s("blurred", true),
+            s("converged", false),
             s("blurred", true),
             s("outlier", true),
             s("not_converged", false),
             s("blurred", true),
         ];
-        // Frame 5, an outlier, keeps its verdict; frame 7 has no kept frame after it.
-        assert_eq!(blurred_between_kept(&statuses), [1, 3, 4]);
-        assert!(blurred_between_kept(&statuses[3..6]).is_empty());
+        // Frames 4-5 are a run with an outlier in it; frame 7 has no kept frame after it.
+        assert_eq!(blurred_between_kept(&statuses), [1, 2]);
+        assert!(blurred_between_kept(&statuses[4..]).is_empty());
     }
 
     #[test]
