@@ -1312,14 +1312,14 @@ fn rejoin_blurred_between_kept(
     if rejoined.is_empty() {
         return rejoined;
     }
-    let flagged: Vec<bool> = statuses.iter().map(|s| s.1).collect();
-    let mut placed = scene.poses.clone();
-    interpolate_flagged(&mut placed, &flagged, &scene.frame_numbers);
-    let mut poses = scene.poses.clone();
+    // Each run lies between two kept frames, the nearest frames not rejoined around it.
+    let mut placing = vec![false; statuses.len()];
     for &i in &rejoined {
-        poses[i] = placed[i];
+        placing[i] = true;
         statuses[i].1 = false;
     }
+    let mut poses = scene.poses.clone();
+    interpolate_flagged(&mut poses, &placing, &scene.frame_numbers);
     set_poses(scene, poses, opts);
     rejoined
 }
