@@ -149,71 +149,8 @@ pub(crate) fn features(
     }
 }
 
-/// Samples whose feature rows are gathered before their outer products are added to `G` in
-/// one matrix product.
-const BLOCK_ROWS: usize = 128;
-
-/// `g += a^T a` and `h_c += a^T v_c` for the `rows` rows of `a` (row-major, `d1` columns)
-/// and the columns `v` (`rows` values each): the moments of a block of samples whose rows
-/// already carry the square root of their weight. matrixmultiply's kernels (SIMD chosen at
-/// run time) do the full square several times faster than a scalar loop does the triangle.
-fn add_block(
-    g: &mut [f64],
-    h: &mut [&mut Vec<f64>],
-    a: &[f64],
-    v: &[&[f64]],
-    rows: usize,
-    d1: usize,
-) {
-    if rows == 0 {
-        return;
-    }
-    assert!(a.len() >= rows * d1 && g.len() == d1 * d1);
-    assert!(v.iter().all(|v| v.len() >= rows) && h.iter().all(|h| h.len() == d1));
-    // SAFETY: `a` holds `rows` x `d1` values, read with strides (1, d1) as a^T (d1 x rows)
-    // and (d1, 1) as a (rows x d1); each `v` holds `rows` values (a column); `g` holds
-    // d1 x d1 values written with strides (d1, 1) and each `h` d1 (a column); the lengths are
-    // checked above and no output aliases an input.
-    unsafe {
-        matrixmultiply::dgemm(
-            d1,
-            rows,
-            d1,
-            1.0,
-            a.as_ptr(),
-            1,
-            d1 as isize,
-            a.as_ptr(),
-            d1 as isize,
-            1,
-            1.0,
-            g.as_mut_ptr(),
-            d1 as isize,
-            1,
-        );
-        for (h, v) in h.iter_mut().zip(v) {
-            matrixmultiply::dgemm(
-                d1,
-                rows,
-                1,
-                1.0,
-                a.as_ptr(),
-                1,
-                d1 as isize,
-                v.as_ptr(),
-                1,
-                1,
-                1.0,
-                h.as_mut_ptr(),
-                1,
-                1,
-            );
-        }
-    }
-}
-
 /// One pass per frame (parallel over frames): the moments with sample weights `w`
-/// (0 skips a sample; none is negative) and, if given, the per-sample albedo per channel.
+/// (0 skips a sample) and, if given, the per-sample albedo per channel.
 pub(crate) fn accumulate(
     samples: &PooledSamples,
     t: &[f32],
@@ -234,38 +171,18 @@ pub(crate) fn accumulate(
         .into_par_iter()
         .map(|f| {
             let mut g = vec![vec![0.0f64; d1 * d1]; nmat];
-            // Each matrix's block of rows `sqrt(w) psi_c`, and each channel's `sqrt(w) P_c`,
-            // waiting for `add_block`. With one matrix the three channels share its rows.
-            let mut rows = vec![vec![0.0f64; BLOCK_ROWS * d1]; nmat];
-            let mut obs = [[0.0f64; BLOCK_ROWS]; 3];
-            let mut filled = 0;
             let mut h = [vec![0.0f64; d1], vec![0.0; d1], vec![0.0; d1]];
             let mut s = [0.0f64; 3];
             let (mut bg, mut bt) = (vec![0.0; lay.nr], vec![0.0; lay.ns]);
             let mut psi = vec![0.0f64; d1];
-            let flush = |g: &mut [Vec<f64>],
-                         h: &mut [Vec<f64>; 3],
-                         rows: &[Vec<f64>],
-                         obs: &[[f64; BLOCK_ROWS]; 3],
-                         filled: usize| {
-                let [h0, h1, h2] = h;
-                let mut hs = [h0, h1, h2];
-                if nmat == 1 {
-                    let v = [&obs[0][..], &obs[1][..], &obs[2][..]];
-                    add_block(&mut g[0], &mut hs, &rows[0], &v, filled, d1);
-                } else {
-                    for (c, (gm, r)) in g.iter_mut().zip(rows).enumerate() {
-                        add_block(gm, &mut hs[c..c + 1], r, &[&obs[c][..]], filled, d1);
-                    }
-                }
-            };
+            let mut psic = vec![0.0f64; d1];
+            psi[d] = 1.0;
+            let mut q = 0.0;
             for i in samples.frame_start[f]..samples.frame_start[f + 1] {
                 let wi = f64::from(w[i]);
                 if wi == 0.0 {
                     continue;
                 }
-                debug_assert!(wi > 0.0, "sample {i}: weight {wi}");
-                let root = wi.sqrt();
                 let (gam, z) = (f64::from(samples.gamma[i]), f64::from(samples.z[i]));
                 features(
                     lay,
@@ -285,39 +202,48 @@ pub(crate) fn accumulate(
                 for c in 0..3 {
                     let p = f64::from(samples.rgb[c][i]);
                     s[c] += wi * p * p;
-                    obs[c][filled] = root * p;
-                    if c >= nmat {
-                        continue;
-                    }
-                    // Albedo scales the shading features only (the ambient light is not
-                    // reflected off this texel alone). The last features: 1 (the light that
-                    // does not depend on the surface), and the gathered light reflected by
-                    // this texel.
+                    // Albedo scales the shading features only (the ambient light is not reflected
+                    // off this texel alone).
                     let alb = albedo.map_or(1.0, |a| f64::from(a[c][i]));
-                    let row = &mut rows[c][filled * d1..(filled + 1) * d1];
-                    let ra = root * alb;
-                    for k in 0..d {
-                        row[k] = ra * psi[k];
-                    }
-                    row[d] = root;
+                    // The last features: 1 (the light that does not depend on the surface),
+                    // and the gathered light reflected by this texel.
                     if let Some(e) = indirect {
-                        row[d + 1] = ra * f64::from(e[c][i]);
+                        q = alb * f64::from(e[c][i]);
+                    }
+                    let hc = &mut h[c];
+                    for k in 0..d {
+                        hc[k] += wi * p * alb * psi[k];
+                    }
+                    hc[d] += wi * p;
+                    if lay.gathered {
+                        hc[d + 1] += wi * p * q;
                     }
                     for k in sp..d1 {
-                        row[k] = root * psi[k];
+                        hc[k] += wi * p * psi[k];
+                    }
+                    if c < nmat {
+                        for k in 0..d {
+                            psic[k] = alb * psi[k];
+                        }
+                        psic[d] = 1.0;
+                        if lay.gathered {
+                            psic[d + 1] = q;
+                        }
+                        psic[sp..].copy_from_slice(&psi[sp..]);
+                        let gm = &mut g[c];
+                        for j in 0..d1 {
+                            let a = wi * psic[j];
+                            let row = &mut gm[j * d1..(j + 1) * d1];
+                            for (x, &q) in row[j..].iter_mut().zip(&psic[j..]) {
+                                *x += a * q;
+                            }
+                        }
                     }
                 }
-                filled += 1;
-                if filled == BLOCK_ROWS {
-                    flush(&mut g, &mut h, &rows, &obs, filled);
-                    filled = 0;
-                }
             }
-            flush(&mut g, &mut h, &rows, &obs, filled);
             let g = g
                 .into_iter()
                 .map(|m| {
-                    // Exactly symmetric: the upper triangle mirrored.
                     DMatrix::from_fn(
                         d1,
                         d1,
@@ -672,100 +598,6 @@ fn local_terms(
 mod tests {
     use super::*;
     use crate::rng::SplitMix64;
-
-    /// The moments summed in blocks of rows against the sums written out sample by sample:
-    /// two frames (one over two blocks and a part, one under a block), some weights 0, with
-    /// the per-sample albedo, gathered light and specular features, and with none of them
-    /// (one matrix shared by the channels).
-    #[test]
-    fn blocked_moments_equal_the_sums_sample_by_sample() {
-        let mut rng = SplitMix64::new(11);
-        let counts = [2 * BLOCK_ROWS + 37, 5];
-        let n: usize = counts.iter().sum();
-        let mut uniform = |lo: f64, hi: f64| (lo + (hi - lo) * rng.uniform()) as f32;
-        let samples = PooledSamples {
-            gamma: (0..n).map(|_| uniform(0.2, 1.0)).collect(),
-            z: (0..n).map(|_| uniform(2.0, 30.0)).collect(),
-            rgb: std::array::from_fn(|_| (0..n).map(|_| uniform(0.0, 1.0)).collect()),
-            frame_start: vec![0, counts[0], n],
-            frame_light: vec![0.3, 0.5],
-            indirect: Some(std::array::from_fn(|_| {
-                (0..n).map(|_| uniform(0.0, 0.1)).collect()
-            })),
-            ..Default::default()
-        };
-        let t: Vec<f32> = (0..n).map(|_| uniform(0.0, 1.0)).collect();
-        let w: Vec<f32> = (0..n)
-            .map(|i| if i % 7 == 3 { 0.0 } else { uniform(0.1, 2.0) })
-            .collect();
-        let albedo: [Vec<f32>; 3] =
-            std::array::from_fn(|_| (0..n).map(|_| uniform(0.3, 0.9)).collect());
-        let full = Layout {
-            nr: 4,
-            ns: 4,
-            frames: 2,
-            ambient: false,
-            interreflection: true,
-            gathered: true,
-            specular: Some(0.3),
-            spec_colours: 1,
-        };
-        let plain = Layout {
-            gathered: false,
-            specular: None,
-            ..full
-        };
-        for (lay, alb) in [(full, Some(&albedo)), (plain, None)] {
-            let m = accumulate(&samples, &t, &w, alb, &lay);
-            let (d, sp) = (lay.d(), lay.spec_feature());
-            let d1 = d + lay.extra();
-            let (mut bg, mut bt) = (vec![0.0; lay.nr], vec![0.0; lay.ns]);
-            for f in 0..2 {
-                let mut g = vec![DMatrix::<f64>::zeros(d1, d1); m[f].g.len()];
-                let mut h = [(); 3].map(|_| DVector::<f64>::zeros(d1));
-                let mut s = [0.0; 3];
-                for i in samples.frame_start[f]..samples.frame_start[f + 1] {
-                    let wi = f64::from(w[i]);
-                    let (gam, z) = (f64::from(samples.gamma[i]), f64::from(samples.z[i]));
-                    let mut psi = vec![0.0; d];
-                    features(&lay, gam, f64::from(t[i]), z, &mut bg, &mut bt, &mut psi);
-                    for c in 0..3 {
-                        let a = alb.map_or(1.0, |a| f64::from(a[c][i]));
-                        let mut x = DVector::<f64>::zeros(d1);
-                        for k in 0..d {
-                            x[k] = a * psi[k];
-                        }
-                        x[d] = 1.0;
-                        if lay.gathered {
-                            x[d + 1] = a * f64::from(samples.indirect.as_ref().unwrap()[c][i]);
-                        }
-                        if let Some(alpha) = lay.specular {
-                            for k in 0..lay.ns {
-                                x[sp + k] = lobe(alpha, gam) / (z * z) * bt[k];
-                            }
-                        }
-                        let p = f64::from(samples.rgb[c][i]);
-                        if c < g.len() {
-                            g[c] += wi * &x * x.transpose();
-                        }
-                        h[c] += wi * p * &x;
-                        s[c] += wi * p * p;
-                    }
-                }
-                for c in 0..3 {
-                    if c < g.len() {
-                        let err = (&m[f].g[c] - &g[c]).amax();
-                        assert!(err < 1e-12 * g[c].amax(), "frame {f} G_{c}: {err}");
-                        assert_eq!(m[f].g[c], m[f].g[c].transpose(), "frame {f} G_{c}");
-                    }
-                    let err = (&m[f].h[c] - &h[c]).amax();
-                    assert!(err < 1e-12 * h[c].amax(), "frame {f} h_{c}: {err}");
-                    assert!((m[f].s[c] - s[c]).abs() < 1e-12 * s[c], "frame {f} s_{c}");
-                }
-                assert_eq!(m[f].g.len(), if alb.is_some() { 3 } else { 1 });
-            }
-        }
-    }
 
     /// The sparse local Jacobians against a numerical one of `y_of`, every optional term on:
     /// `H = sum J^T G J` and `J^T (G y - h)`, and the cost against `cost`.
