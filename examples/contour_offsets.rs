@@ -8,16 +8,14 @@
 //! cargo run --release --example contour_offsets -- CASE START_DIR MODEL_DIR FIRST LAST
 //! ```
 
-#[path = "common/phantom_run.rs"]
-mod phantom_run;
-
 use bronchosim::camera::pose::camera_centre;
 use bronchosim::camera::Camera;
 use bronchosim::image::Frame;
+use bronchosim::io::case::Case;
+use bronchosim::io::poses::read_poses;
 use bronchosim::math::{Affine, Vector3};
 use bronchosim::model::Model;
 use bronchosim::raycast::Scene;
-use phantom_run::{open_phantom, PhantomRun};
 use std::path::PathBuf;
 
 const STEP: f64 = 2.0;
@@ -165,19 +163,19 @@ fn main() -> anyhow::Result<()> {
     let start = PathBuf::from(&args[1]);
     let model = Model::load(&PathBuf::from(&args[2]))?;
     let (first, last): (usize, usize) = (args[3].parse()?, args[4].parse()?);
-    let PhantomRun {
-        truth,
-        frames,
-        entries,
-    } = open_phantom(&case_dir, Some(&start))?;
+    let case = Case::open(&case_dir)?;
+    let poses_of = |file: &std::path::Path, dir: &std::path::Path| -> anyhow::Result<Vec<Affine>> {
+        Ok(read_poses(file, dir)?
+            .iter()
+            .map(|p| p.pose.camera_to_world)
+            .collect())
+    };
+    let truth = poses_of(&case_dir.join("truth/poses.json"), &case_dir)?;
+    let start = poses_of(&start.join("poses.json"), &start)?;
+    let frames: Vec<Frame> = case.frame_source()?.collect::<Result<_, _>>()?;
     let cam = &model.manifest.camera;
     for f in first..=last.min(frames.len() - 1) {
-        let a = offsets(
-            &model.scene,
-            cam,
-            &entries[f].pose.camera_to_world,
-            &frames[f],
-        );
+        let a = offsets(&model.scene, cam, &start[f], &frames[f]);
         let b = offsets(&model.scene, cam, &truth[f], &frames[f]);
         println!("frame {f:3} start: {}", stats(&a));
         println!("frame {f:3} truth: {}", stats(&b));
