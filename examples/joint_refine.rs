@@ -6,7 +6,7 @@
 //! cargo run --release --example joint_refine -- CASE WORK start=DIR [levels=1,0] [renders=3]
 //!     [steps=4] [cell=0.25] [trust=1] [minframes=2] [gain=yes|no] [hold=yes|no]
 //!     [final=yes|no] [search=yes|no] [run=6] [gainmin=0.005] [jitter=yes|no]
-//!     [light=MODEL] [costs=yes|no] [mesh=truth|ctn|offset:D]
+//!     [light=MODEL] [costs=yes|no] [mesh=truth|ctn|offset:D] [pattern=RUN,MM,DEG,PASSES]
 //! ```
 //! `start=DIR` reads `DIR/poses.json` (e.g. a model built with registration). WORK receives
 //! `start/case` and `start/model` (built with those poses, every frame, no hold-out), and
@@ -20,6 +20,10 @@
 //! vertex takes its nearest true vertex's), `mesh=offset:D` against the model's mesh moved D mm
 //! along its normals: how much of where the stage ends is the mesh's. The final model is built
 //! with the CT's mesh either way.
+//! `pattern=RUN,MM,DEG,PASSES` then searches without derivatives: every run of RUN consecutive
+//! frames is moved together by MM along each camera axis and by DEG about each, both ways, and
+//! a move is kept when the reduced cost rendered afresh (on the last level) falls; PASSES
+//! sweeps over the runs.
 
 #[path = "common/phantom_run.rs"]
 mod phantom_run;
@@ -63,6 +67,7 @@ fn main() -> anyhow::Result<()> {
     let mut final_model = true;
     let mut search: Option<ShiftSearch> = None;
     let mut reg_opts = RegistrationOptions::default();
+    let mut pattern: Option<(usize, f64, f64, usize)> = None;
     for kv in &args[2..] {
         match kv.split_once('=') {
             Some(("start", v)) => start = Some(PathBuf::from(v)),
@@ -92,6 +97,10 @@ fn main() -> anyhow::Result<()> {
             Some(("gain", v)) => opts.estimate_gain = v == "yes",
             Some(("hold", v)) => opts.hold_mean_view_shift = v == "yes",
             Some(("search", v)) => search = (v == "yes").then(ShiftSearch::default),
+            Some(("pattern", v)) => {
+                let p: Vec<&str> = v.split(',').collect();
+                pattern = Some((p[0].parse()?, p[1].parse()?, p[2].parse()?, p[3].parse()?));
+            }
             Some(("run", v)) => {
                 if let Some(s) = search.as_mut() {
                     s.run_frames = v.parse()?
@@ -200,6 +209,60 @@ fn main() -> anyhow::Result<()> {
             t.elapsed().as_secs_f64(),
             score(&current, &truth)
         );
+    }
+    if let Some((run, t_mm, r_deg, passes)) = pattern {
+        let eval = |poses: &[Affine]| -> anyhow::Result<f64> {
+            let r = refine_jointly(
+                &reg,
+                &frames,
+                &light.gains,
+                None,
+                poses,
+                &vec![JointRole::Refined; frames.len()],
+                &JointOptions {
+                    level: *levels.last().unwrap_or(&0),
+                    renders: 1,
+                    steps: 0,
+                    shift_search: None,
+                    ..opts.clone()
+                },
+            )?;
+            Ok(r.costs[0].0)
+        };
+        let t = Instant::now();
+        let mut best = eval(&current)?;
+        println!(
+            "pattern: start cost {best:.5} ({:.1} s an evaluation)",
+            t.elapsed().as_secs_f64()
+        );
+        let n = current.len();
+        for pass in 0..passes {
+            let mut moves = 0;
+            for start in (0..n).step_by(run) {
+                for axis in 0..6 {
+                    let step = if axis < 3 { t_mm } else { r_deg.to_radians() };
+                    for sign in [1.0, -1.0] {
+                        let mut cand = current.clone();
+                        let mut xi = [0.0; 6];
+                        xi[axis] = sign * step;
+                        for p in cand.iter_mut().skip(start).take(run) {
+                            *p = bronchosim::registration::pose::perturb(p, &xi);
+                        }
+                        let c = eval(&cand)?;
+                        if c < best {
+                            best = c;
+                            current = cand;
+                            moves += 1;
+                            break;
+                        }
+                    }
+                }
+            }
+            println!(
+                "pattern pass {pass}: {moves} moves, cost {best:.5}: {}",
+                score(&current, &truth)
+            );
+        }
     }
     if !final_model {
         return Ok(());
