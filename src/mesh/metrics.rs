@@ -90,15 +90,17 @@ pub fn mesh_stats(mesh: &TriMesh) -> MeshStats {
 }
 
 /// Signed enclosed volume (mm³) by the divergence theorem: positive when normals face outward,
-/// so a closed lumen mesh (normals facing in) gives minus the lumen's volume.
+/// so a closed lumen mesh (normals facing in) gives minus the lumen's volume; the same value on
+/// every run, whatever the threads ([`crate::parallel`]).
 pub fn signed_volume(mesh: &TriMesh) -> f64 {
-    mesh.triangles
-        .par_iter()
-        .map(|&[a, b, c]| {
-            let p = |v: u32| mesh.positions[v as usize].coords.cast::<f64>();
-            p(a).dot(&p(b).cross(&p(c))) / 6.0
-        })
-        .sum()
+    let p = |v: u32| mesh.positions[v as usize].coords.cast::<f64>();
+    let block = |r: std::ops::Range<usize>| {
+        mesh.triangles[r]
+            .iter()
+            .map(|&[a, b, c]| p(a).dot(&p(b).cross(&p(c))) / 6.0)
+            .sum::<f64>()
+    };
+    crate::parallel::ordered_block_sum(mesh.triangles.len(), 4096, 0.0, block, |x, y| x + y)
 }
 
 /// Distances from the vertices of one mesh to the surface of another (mm).
