@@ -8,14 +8,17 @@
 //! cargo run --release --example contour_offsets -- CASE START_DIR MODEL_DIR FIRST LAST
 //! ```
 
+#[path = "common/phantom_run.rs"]
+#[allow(dead_code)]
+mod phantom_run;
+
 use bronchosim::camera::pose::camera_centre;
 use bronchosim::camera::Camera;
 use bronchosim::image::Frame;
-use bronchosim::io::case::Case;
-use bronchosim::io::poses::read_poses;
 use bronchosim::math::{Affine, Vector3};
 use bronchosim::model::Model;
 use bronchosim::raycast::Scene;
+use phantom_run::{open_phantom, PhantomRun};
 use std::path::PathBuf;
 
 const STEP: f64 = 2.0;
@@ -36,20 +39,11 @@ fn depth(scene: &Scene, cam: &Camera, pose: &Affine, u: f64, v: f64) -> Option<f
         .map(|h| h.t)
 }
 
+/// The frame's summed channels at (x, y), bilinear.
 fn lum(frame: &Frame, x: f64, y: f64) -> Option<f64> {
-    let (w, h) = (frame.width as usize, frame.height as usize);
-    if x < 0.0 || y < 0.0 || x > (w - 2) as f64 || y > (h - 2) as f64 {
-        return None;
-    }
-    let (x0, y0) = (x as usize, y as usize);
-    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
-    let at = |i: usize, j: usize| {
-        let k = 3 * (j * w + i);
-        (frame.rgb[k] + frame.rgb[k + 1] + frame.rgb[k + 2]) as f64
-    };
-    let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx;
-    let bot = at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx;
-    Some(top * (1.0 - fy) + bot * fy)
+    frame
+        .bilinear(x, y)
+        .map(|p| p.iter().map(|&v| f64::from(v)).sum())
 }
 
 /// Offsets (px, along near -> far) of the frame's steepest step from the model's contours.
@@ -163,19 +157,19 @@ fn main() -> anyhow::Result<()> {
     let start = PathBuf::from(&args[1]);
     let model = Model::load(&PathBuf::from(&args[2]))?;
     let (first, last): (usize, usize) = (args[3].parse()?, args[4].parse()?);
-    let case = Case::open(&case_dir)?;
-    let poses_of = |file: &std::path::Path, dir: &std::path::Path| -> anyhow::Result<Vec<Affine>> {
-        Ok(read_poses(file, dir)?
-            .iter()
-            .map(|p| p.pose.camera_to_world)
-            .collect())
-    };
-    let truth = poses_of(&case_dir.join("truth/poses.json"), &case_dir)?;
-    let start = poses_of(&start.join("poses.json"), &start)?;
-    let frames: Vec<Frame> = case.frame_source()?.collect::<Result<_, _>>()?;
+    let PhantomRun {
+        truth,
+        frames,
+        entries,
+    } = open_phantom(&case_dir, Some(&start))?;
     let cam = &model.manifest.camera;
     for f in first..=last.min(frames.len() - 1) {
-        let a = offsets(&model.scene, cam, &start[f], &frames[f]);
+        let a = offsets(
+            &model.scene,
+            cam,
+            &entries[f].pose.camera_to_world,
+            &frames[f],
+        );
         let b = offsets(&model.scene, cam, &truth[f], &frames[f]);
         println!("frame {f:3} start: {}", stats(&a));
         println!("frame {f:3} truth: {}", stats(&b));

@@ -12,15 +12,17 @@
 //! MODEL_DIR: a model of the case (e.g. built from the true poses, `--poses fixed`); `uniform`
 //! compares against the light alone, the albedo uniform (the registration's geometry rounds).
 
-use bronchosim::io::case::Case;
-use bronchosim::io::poses::read_poses;
-use bronchosim::math::Affine;
+#[path = "common/phantom_run.rs"]
+#[allow(dead_code)]
+mod phantom_run;
+
 use bronchosim::model::Model;
 use bronchosim::registration::align::LevelProblem;
 use bronchosim::registration::photometric::RayGrid;
 use bronchosim::registration::pyramid::{ObservedPyramid, PyramidOptions};
 use bronchosim::registration::{PhotometricModel, RegistrationOptions};
 use nalgebra::{SMatrix, SVector};
+use phantom_run::{open_phantom, PhantomRun};
 use std::path::PathBuf;
 
 type M7 = SMatrix<f64, 7, 7>;
@@ -52,12 +54,7 @@ fn main() -> anyhow::Result<()> {
     let (first, last): (usize, usize) = (args[2].parse()?, args[3].parse()?);
     let level: usize = args.get(4).map_or(Ok(0), |s| s.parse())?;
     let stride: usize = args.get(5).map_or(Ok(2), |s| s.parse())?;
-    let case = Case::open(&case_dir)?;
-    let truth: Vec<Affine> = read_poses(&case_dir.join("truth/poses.json"), &case_dir)?
-        .iter()
-        .map(|p| p.pose.camera_to_world)
-        .collect();
-    let frames: Vec<_> = case.frame_source()?.collect::<Result<_, _>>()?;
+    let PhantomRun { truth, frames, .. } = open_phantom(&case_dir, None)?;
     let light = model.calibrated().expect("a calibrated light");
     let gains = &light.gains;
     anyhow::ensure!(
