@@ -131,19 +131,20 @@ fn a_lost_track_resumes_from_the_frames_before_it_refined() {
         t.frames_tracked, t.first_lost, t.resumed_at
     );
     // Measured: the track is lost at frame 15; resumed there, frames 15-21 are within 0.41
-    // mm and 1.6 deg, and the track is not lost again. Without the resume
-    // (`TrackingOptions::resumes` 0) frames 15 and 16 stay 11 and 25 deg off, and every
-    // frame from 15 on is left out as lost.
+    // mm and 1.6 deg, and the track is not lost again (over eight inputs one pixel apart,
+    // `BRONCHOSIM_TEST_PERTURB` 0-7: within 0.39-0.45 mm and 1.55-2.15 deg, the last frame the
+    // farthest). Without the resume (`TrackingOptions::resumes` 0) frames 15 and 16 stay 11
+    // and 25 deg off, and every frame from 15 on is left out as lost.
     assert_eq!(t.resumed_at, [15], "{t:?}");
     assert_eq!(t.first_lost, None);
     let after = errors[15..]
         .iter()
-        .filter(|e| e.0 <= 1.0 && e.1 <= 2.0)
+        .filter(|e| e.0 <= 1.0 && e.1 <= 3.0)
         .count();
     assert_eq!(
         after,
         7,
-        "frames 15-21 within 1 mm and 2 deg: {:?}",
+        "frames 15-21 within 1 mm and 3 deg: {:?}",
         &errors[15..]
     );
     assert_eq!(
@@ -306,13 +307,15 @@ fn sharp_frames_at_the_carina_are_not_flagged_blurred() {
         t.first_lost,
         &errors[48..]
     );
-    // Measured: none flagged, frames 48-59 within 0.58 mm and 2.2 deg. (Tracking alone at
-    // this size: frames 32-42 turn up to 34 deg about their view axes in the trachea and come
-    // back; the rounds of a build refine them.)
+    // Measured: none flagged, frames 48-59 within 0.58 mm and 2.2 deg (over eight inputs one
+    // pixel apart, `BRONCHOSIM_TEST_PERTURB` 0-7: none flagged, within 0.41-0.64 mm and
+    // 2.1-4.0 deg, the turn shared by the run). (Tracking alone at this size: frames 32-42
+    // turn up to 34 deg about their view axes in the trachea and come back; the rounds of a
+    // build refine them.)
     assert_eq!(flagged, Vec::<usize>::new());
     assert_eq!(t.first_lost, None);
     let past = &errors[48..];
-    assert!(past.iter().all(|e| e.0 <= 1.0 && e.1 <= 3.0), "{past:?}");
+    assert!(past.iter().all(|e| e.0 <= 1.0 && e.1 <= 6.0), "{past:?}");
 }
 
 #[test]
@@ -346,10 +349,14 @@ fn a_blackout_of_four_frames_is_crossed() {
     let (t, errors) = run("default", |_| {});
     // Measured: never lost; frames 14-21 within 0.28 mm and 1.1 deg (with three black frames:
     // 0.29 mm and 1.7 deg; with five, the first frame after them 6.3 deg off, the rest within
-    // 2.6 deg; with six they are found 16-17 deg off).
+    // 2.6 deg; with six they are found 16-17 deg off). Which turn the frames after the gap
+    // take is chance: over seven inputs one pixel apart (`BRONCHOSIM_TEST_PERTURB` 0-6) they
+    // were always found, within 0.28-0.88 mm, but up to 1.1-5.8 deg off (median 0.7-2.4 deg).
     assert_eq!((t.first_lost, t.frames_tracked), (None, 18), "{t:?}");
+    let mut turns: Vec<f64> = errors[14..].iter().map(|e| e.1).collect();
+    turns.sort_by(f64::total_cmp);
     assert!(
-        errors[14..].iter().all(|e| e.0 <= 0.5 && e.1 <= 1.5),
+        errors[14..].iter().all(|e| e.0 <= 1.5) && turns[turns.len() / 2] <= 3.5,
         "frames 14-21: {:?}",
         &errors[14..]
     );
